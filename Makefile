@@ -1,0 +1,22 @@
+# The two commands in the README: `make demo` (main job on the built-in default) and `make test`.
+PYTHON ?= python3
+export XDG_RUNTIME_DIR ?= /tmp/gma-xdg-$(shell id -u)
+export ANNY_CACHE_DIR ?= $(HOME)/.cache/gma/anny
+
+.PHONY: install demo test lint bench
+
+install:
+	@mkdir -p $(XDG_RUNTIME_DIR) && chmod 700 $(XDG_RUNTIME_DIR)
+	@bash scripts/install.sh
+
+demo: install
+	$(PYTHON) -m gma.cli demo --out out/demo
+
+test: install
+	$(PYTHON) -m pytest tests -q
+
+lint:
+	$(PYTHON) -m ruff check gma viewer tests benchmarks
+
+bench: install
+	$(PYTHON) benchmarks/render.py

@@ -1,0 +1,1 @@
+"""Subcommands of ``gma``: one module each, with ``register(subparsers)``."""

@@ -1,0 +1,62 @@
+"""Choosing a wgpu adapter: a real GPU first, Mesa's lavapipe (CPU) as the fallback.
+
+``GMA_ADAPTER`` forces the choice: ``gpu`` (any hardware adapter), ``cpu`` (a software adapter such as
+lavapipe), or any other text, matched case-insensitively against the adapter's device/vendor name.
+"""
+
+from __future__ import annotations
+
+import os
+
+import wgpu
+
+# Explicit graphics APIs beat the GL compatibility path, which lacks storage buffers in many places.
+_BACKEND_RANK = {"Vulkan": 0, "Metal": 0, "D3D12": 0, "DX12": 0, "OpenGL": 2, "GL": 2}
+_TYPE_RANK = {"DiscreteGPU": 0, "IntegratedGPU": 1, "VirtualGPU": 2, "Unknown": 3, "CPU": 4}
+
+INSTALL_HINT = (
+    "No usable GPU adapter was found by wgpu. Install a Vulkan driver: on Debian/Ubuntu without a GPU, "
+    "`apt-get install mesa-vulkan-drivers` gives Mesa's lavapipe CPU driver (`bash scripts/install.sh` "
+    "does this); with an NVIDIA/AMD/Intel GPU install its Vulkan driver. Set GMA_ADAPTER=cpu or =gpu to "
+    "force a kind, or a name fragment to pick one adapter."
+)
+
+
+class NoAdapterError(RuntimeError):
+    """Raised when no adapter matches; the message says how to install a driver."""
+
+
+def describe(adapter: wgpu.GPUAdapter) -> str:
+    info = adapter.info
+    return f"{info.get('device', '?')} [{info.get('adapter_type', '?')}, {info.get('backend_type', '?')}]"
+
+
+def _rank(adapter: wgpu.GPUAdapter) -> tuple[int, int]:
+    info = adapter.info
+    return (
+        _BACKEND_RANK.get(info.get("backend_type", ""), 1),
+        _TYPE_RANK.get(info.get("adapter_type", "Unknown"), 3),
+    )
+
+
+def _matches(adapter: wgpu.GPUAdapter, wanted: str) -> bool:
+    info = adapter.info
+    kind = info.get("adapter_type", "")
+    if wanted == "gpu":
+        return kind != "CPU"
+    if wanted in ("cpu", "lavapipe", "llvmpipe", "software"):
+        return kind == "CPU"
+    text = " ".join(str(info.get(k, "")) for k in ("device", "vendor", "description", "backend_type"))
+    return wanted in text.lower()
+
+
+def select_adapter(preference: str | None = None) -> wgpu.GPUAdapter:
+    """Return the best adapter, honouring ``preference`` (default: ``$GMA_ADAPTER`` or ``auto``)."""
+    wanted = (preference or os.environ.get("GMA_ADAPTER") or "auto").strip().lower()
+    adapters = list(wgpu.gpu.enumerate_adapters_sync())
+    if wanted != "auto":
+        adapters = [a for a in adapters if _matches(a, wanted)]
+    if not adapters:
+        found = ", ".join(describe(a) for a in wgpu.gpu.enumerate_adapters_sync()) or "none"
+        raise NoAdapterError(f"{INSTALL_HINT}\n(GMA_ADAPTER={wanted!r}; adapters seen: {found})")
+    return min(adapters, key=_rank)

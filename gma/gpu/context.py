@@ -1,0 +1,168 @@
+"""The GPU context: one wgpu device with the adapter's real limits, its optional features, the shader
+library and the pipeline cache. Code that renders takes a ``GpuContext`` argument instead of reaching
+for a global device."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+import wgpu
+
+from gma.gpu.adapter import NoAdapterError, describe, select_adapter
+from gma.gpu.shaders import ShaderLibrary
+from gma.gpu.transfers import TransferStats
+
+__all__ = ["GpuContext", "NoAdapterError", "get_context"]
+
+# Optional features we use when the adapter has them; every use has a fallback path.
+OPTIONAL_FEATURES = ("shader-float32-atomic", "subgroup", "timestamp-query")
+
+# Limits we raise to what the adapter offers (WebGPU defaults are far lower than real hardware).
+RAISED_LIMITS = (
+    "max-storage-buffer-binding-size",
+    "max-buffer-size",
+    "max-storage-buffers-per-shader-stage",
+    "max-compute-workgroup-storage-size",
+    "max-compute-invocations-per-workgroup",
+    "max-compute-workgroup-size-x",
+    "max-compute-workgroup-size-y",
+    "max-compute-workgroups-per-dimension",
+    "max-bind-groups",
+)
+
+STORAGE = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST
+
+
+@dataclass
+class GpuContext:
+    """A wgpu device plus what is needed to run the project's compute passes on it.
+
+    Create with :meth:`create`; ``disable_features`` switches optional features off, which is how the
+    tests exercise the fallback paths (e.g. compare-and-swap instead of native float atomics).
+    """
+
+    adapter: wgpu.GPUAdapter
+    device: wgpu.GPUDevice
+    features: frozenset[str]
+    shaders: ShaderLibrary
+    transfers: TransferStats = field(default_factory=TransferStats)
+    _pipelines: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
+        adapter = select_adapter(preference)
+        wanted = [f for f in OPTIONAL_FEATURES if f in adapter.features and f not in disable_features]
+        limits = {k: adapter.limits[k] for k in RAISED_LIMITS if k in adapter.limits}
+        device = adapter.request_device_sync(
+            label="gma", required_features=wanted, required_limits=limits
+        )
+        return cls(adapter=adapter, device=device, features=frozenset(wanted), shaders=ShaderLibrary())
+
+    # -- capabilities -------------------------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return describe(self.adapter)
+
+    @property
+    def is_software(self) -> bool:
+        return self.adapter.info.get("adapter_type") == "CPU"
+
+    @property
+    def has_float_atomics(self) -> bool:
+        return "shader-float32-atomic" in self.features
+
+    @property
+    def has_subgroups(self) -> bool:
+        return "subgroup" in self.features
+
+    @property
+    def has_timestamps(self) -> bool:
+        return "timestamp-query" in self.features
+
+    @property
+    def limits(self) -> dict:
+        return self.device.limits
+
+    @property
+    def max_binding_bytes(self) -> int:
+        return int(self.device.limits["max-storage-buffer-binding-size"])
+
+    # -- pipelines ----------------------------------------------------------------------------------
+    def compute_pipeline(
+        self, path: str, defines: dict | None = None, entry_point: str = "main"
+    ) -> wgpu.GPUComputePipeline:
+        """The compute pipeline for WGSL file ``path`` (relative to ``shaders/wgsl``), cached by
+        (path, defines, entry point) so that a frame never compiles anything."""
+        key = (path, tuple(sorted((defines or {}).items())), entry_point)
+        pipeline = self._pipelines.get(key)
+        if pipeline is None:
+            module = self.shaders.module(self.device, path, defines)
+            pipeline = self.device.create_compute_pipeline(
+                label=f"{path}:{entry_point}",
+                layout=wgpu.AutoLayoutMode.auto,
+                compute={"module": module, "entry_point": entry_point},
+            )
+            self._pipelines[key] = pipeline
+        return pipeline
+
+    def bind_group(self, pipeline: wgpu.GPUComputePipeline, buffers: list, group: int = 0):
+        """A bind group binding ``buffers[i]`` at ``@binding(i)`` (entries may be (buffer, offset,
+        size) tuples to bind a range)."""
+        entries = []
+        for i, b in enumerate(buffers):
+            if isinstance(b, tuple):
+                buf, offset, size = b
+                entries.append({"binding": i, "resource": {"buffer": buf, "offset": offset, "size": size}})
+            else:
+                entries.append({"binding": i, "resource": {"buffer": b, "offset": 0, "size": b.size}})
+        return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
+
+    # -- buffers ------------------------------------------------------------------------------------
+    def buffer(self, nbytes: int, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:
+        """An uninitialised (zeroed by wgpu) buffer of at least 4 bytes; sizes round up to 4."""
+        size = max(4, (int(nbytes) + 3) // 4 * 4)
+        if size > int(self.device.limits["max-buffer-size"]):
+            raise MemoryError(f"buffer {label!r} needs {size} bytes, over the device's max-buffer-size")
+        return self.device.create_buffer(label=label, size=size, usage=usage)
+
+    def upload(self, array: np.ndarray, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:
+        """A new buffer holding ``array`` (C-contiguous copy made if needed); counted in transfers."""
+        data = np.ascontiguousarray(array)
+        buf = self.buffer(data.nbytes, label, usage)
+        self.write(buf, data)
+        return buf
+
+    def write(self, buffer: wgpu.GPUBuffer, array: np.ndarray, offset: int = 0) -> None:
+        data = np.ascontiguousarray(array)
+        if data.nbytes == 0:
+            return
+        with self.transfers.upload(data.nbytes):
+            self.device.queue.write_buffer(buffer, offset, data)
+
+    def read(self, buffer: wgpu.GPUBuffer, dtype, count: int | None = None, offset: int = 0) -> np.ndarray:
+        """Copy ``count`` items of ``dtype`` back from ``buffer`` (waits for queued work)."""
+        dtype = np.dtype(dtype)
+        nbytes = (buffer.size - offset) if count is None else int(count) * dtype.itemsize
+        if nbytes == 0:
+            return np.zeros(0, dtype)
+        with self.transfers.download(nbytes):
+            raw = self.device.queue.read_buffer(buffer, offset, nbytes)
+        return np.frombuffer(raw, dtype=dtype).copy()
+
+    def submit(self, encoder: wgpu.GPUCommandEncoder) -> None:
+        self.device.queue.submit([encoder.finish()])
+
+
+_shared: GpuContext | None = None
+_shared_lock = threading.Lock()
+
+
+def get_context() -> GpuContext:
+    """The process-wide default context, created on first use (never at import)."""
+    global _shared
+    with _shared_lock:
+        if _shared is None:
+            _shared = GpuContext.create()
+        return _shared

@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# Installs what GMA needs on a fresh Debian/Ubuntu machine, skipping what is already there.
+# - a Vulkan driver: Mesa's lavapipe (CPU) when no Vulkan ICD is present, xvfb for window tests;
+# - torch pinned first, so that the CPU wheel is used instead of the multi-GB CUDA build;
+# - this package in editable mode, with the SMPL-X and dev extras.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+
+have_vulkan_icd() {
+    ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1
+}
+
+need_apt=()
+have_vulkan_icd || need_apt+=(mesa-vulkan-drivers libvulkan1)
+command -v Xvfb >/dev/null 2>&1 || need_apt+=(xvfb)
+if [ ${#need_apt[@]} -gt 0 ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "[install] apt-get install ${need_apt[*]}"
+        export DEBIAN_FRONTEND=noninteractive
+        apt-get update -qq
+        apt-get install -y -qq "${need_apt[@]}" >/dev/null
+    else
+        echo "[install] missing system packages: ${need_apt[*]} (install them with your package manager)" >&2
+    fi
+fi
+
+if ! "$PY" -c "import torch" >/dev/null 2>&1; then
+    echo "[install] pip install torch==2.13.0"
+    "$PY" -m pip install -q torch==2.13.0
+fi
+
+stamp=.gma-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+    echo "[install] pip install -e .[smplx,dev]"
+    "$PY" -m pip install -q -e ".[smplx,dev]"
+    touch "$stamp"
+fi

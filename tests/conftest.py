@@ -1,0 +1,32 @@
+"""Shared fixtures: one GPU context per session (lavapipe on CI), created lazily."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+
+import pytest
+
+os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
+
+
+@pytest.fixture(scope="session")
+def gpu():
+    """The default GpuContext (skips the test when no adapter exists at all)."""
+    from gma.gpu import NoAdapterError, get_context
+
+    try:
+        return get_context()
+    except NoAdapterError as exc:
+        pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="session")
+def gpu_no_float_atomics():
+    """A second context with native float atomics switched off, to test the CAS fallback."""
+    from gma.gpu import GpuContext, NoAdapterError
+
+    try:
+        return GpuContext.create(disable_features=("shader-float32-atomic", "subgroup"))
+    except NoAdapterError as exc:
+        pytest.skip(str(exc))

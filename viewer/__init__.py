@@ -1,0 +1,1 @@
+"""The GMA real-time viewer (glfw window + wgpu surface)."""
