@@ -1,0 +1,109 @@
+"""Crash-safe writes: a file appears complete or not at all, and so does a sequence directory.
+
+Files are written to a temporary name in the same directory, flushed and fsynced, then renamed over
+the target (``os.replace`` is atomic on POSIX and Windows when both names are on one filesystem).
+Directories are built under a hidden temporary name next to the target and renamed into place at
+the end, so an interrupted ``gma synth`` or ``gma import`` never leaves a half-written sequence that
+a later ``gma fit`` would read.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["atomic_dir", "atomic_write_bytes", "atomic_write_json", "atomic_write_npz"]
+
+
+def _fsync_dir(path: Path) -> None:
+    # Persist the rename itself; not possible (nor needed) on Windows.
+    if os.name != "nt":
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def _atomic_file(path: Path) -> Iterator[Path]:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        with open(tmp_path, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp_path, path)
+        _fsync_dir(path.parent)
+    except BaseException:
+        tmp_path.unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see either the old file or the complete new one."""
+    with _atomic_file(Path(path)) as tmp:
+        tmp.write_bytes(data)
+
+
+def atomic_write_json(path: str | os.PathLike, obj) -> None:
+    """Atomically write ``obj`` as indented JSON (numpy scalars and arrays become plain lists)."""
+
+    def default(o):
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+    atomic_write_bytes(path, (json.dumps(obj, indent=1, default=default) + "\n").encode())
+
+
+def atomic_write_npz(path: str | os.PathLike, **arrays) -> None:
+    """Atomically write an uncompressed ``.npz``; object arrays are refused so that the file can be
+    read back with ``allow_pickle=False``."""
+    for key, value in arrays.items():
+        if np.asarray(value).dtype == object:
+            raise TypeError(f"{path}: array {key!r} has dtype object, which would need pickle")
+    with _atomic_file(Path(path)) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+
+
+@contextlib.contextmanager
+def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+    """Build a directory under a temporary name and move it to ``path`` when the block succeeds.
+
+    Yields the temporary directory. On an exception it is removed and ``path`` is left untouched.
+    With ``overwrite`` an existing ``path`` is replaced (moved aside first, deleted after the rename,
+    so a crash between the two steps leaves the old copy under a hidden ``.old`` name, never a mix).
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} already exists (pass overwrite=True / --force to replace it)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    os.chmod(tmp, 0o755)  # mkdtemp makes it private (0700); a dataset directory is normally shared
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old = None
+    if path.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+        os.replace(path, old / "dir")
+    os.replace(tmp, path)
+    _fsync_dir(path.parent)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
