@@ -1,0 +1,1 @@
+"""Synthetic ground truth: a clothed, textured person on the body model, rendered as a mesh."""
