@@ -32,3 +32,13 @@ def gpu_no_float_atomics():
         return GpuContext.create(disable_features=("shader-float32-atomic", "subgroup"))
     except NoAdapterError as exc:
         pytest.skip(str(exc))
+
+
+@pytest.fixture(scope="session")
+def anny_body():
+    """The default Anny body, created once per session (reads anny's cache under $ANNY_CACHE_DIR; the
+    very first creation on a machine builds that cache, ~75 s)."""
+    pytest.importorskip("anny")
+    from gma.body import load_body
+
+    return load_body("anny")

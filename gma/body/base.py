@@ -80,7 +80,7 @@ class BodyPose:
     vertices: torch.Tensor
 
 
-@dataclass
+@dataclass(eq=False, repr=False)  # holds large tensors: identity equality, short repr
 class BodyModel(ABC):
     """Mesh, rig and parameter spaces of a parametric body.
 
@@ -105,6 +105,10 @@ class BodyModel(ABC):
     face_label_names: tuple[str, ...]
     face_labels: torch.Tensor
     regions: dict[str, torch.Tensor] = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}({self.name!r}, V={self.num_vertices}, F={self.num_faces}, "
+                f"J={self.num_bones}, up={self.up_axis!r})")
 
     # -- sizes -------------------------------------------------------------------------------------
     @property
