@@ -9,17 +9,17 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from gma.data import BodyParams, Cameras, SequenceWriter, look_at, read_sequence
+from gma.data import SequenceBody, Cameras, SequenceWriter, look_at, read_sequence
 from gma.data.atomic import atomic_write_bytes
 from gma.data.body_params import find_model_file, load_body
 
 W, H, T = 24, 16, 3
 
 
-def anny_body(t: int = T) -> BodyParams:
+def anny_body(t: int = T) -> SequenceBody:
     pose = np.tile(np.eye(4, dtype=np.float32), (t, 104, 1, 1))
     pose[:, 0, :3, 3] = np.arange(t)[:, None] * 0.1
-    return BodyParams("anny", {"pose": pose, "phenotype": np.full(6, 0.5, np.float32)})
+    return SequenceBody("anny", {"pose": pose, "phenotype": np.full(6, 0.5, np.float32)})
 
 
 def cameras(t: int = 1) -> Cameras:

@@ -12,14 +12,14 @@ What the fitting code calls::
         params = seq.body.frame(i)              # dict of arrays, see gma.data.body_params
 """
 
-from gma.data.body_params import BODY_MODELS, BodyParams, find_model_file, load_body, save_body
+from gma.data.body_params import BODY_MODELS, SequenceBody, find_model_file, load_body, save_body
 from gma.data.cameras import Cameras, load_cameras, look_at, save_cameras
 from gma.data.sequence import SPLIT_KEYS, Sequence, SequenceWriter, read_sequence
 
 __all__ = [
     "BODY_MODELS",
     "SPLIT_KEYS",
-    "BodyParams",
+    "SequenceBody",
     "Cameras",
     "Sequence",
     "SequenceWriter",

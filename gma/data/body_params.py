@@ -31,7 +31,7 @@ from gma.data.atomic import atomic_write_npz
 __all__ = [
     "ANNY_BONES",
     "BODY_MODELS",
-    "BodyParams",
+    "SequenceBody",
     "find_model_file",
     "load_body",
     "load_smpl_model_arrays",
@@ -69,7 +69,7 @@ MODEL_ENV = {"smplx": "GMA_SMPLX_DIR", "smpl": "GMA_SMPL_DIR"}
 
 
 @dataclass
-class BodyParams:
+class SequenceBody:
     """Body model name plus its arrays (see the module docstring for names and shapes)."""
 
     model: str
@@ -90,18 +90,19 @@ class BodyParams:
         per_frame = _PER_FRAME[self.model]
         return {k: (v[i] if k in per_frame else v) for k, v in self.arrays.items()}
 
-    def subset(self, indices) -> BodyParams:
+    def subset(self, indices) -> SequenceBody:
         """The same person over frames ``indices`` (in that order)."""
         idx = np.asarray(indices, dtype=np.int64)
         per_frame = _PER_FRAME[self.model]
-        return BodyParams(self.model, {k: (v[idx] if k in per_frame else v) for k, v in self.arrays.items()})
+        arrays = {k: (v[idx] if k in per_frame else v) for k, v in self.arrays.items()}
+        return SequenceBody(self.model, arrays)
 
 
 def _shape_str(shape) -> str:
     return "[" + ", ".join("T" if s == -1 else ("*" if s is None else str(s)) for s in shape) + "]"
 
 
-def validate_body(body: BodyParams, source: str, num_frames: int | None = None) -> None:
+def validate_body(body: SequenceBody, source: str, num_frames: int | None = None) -> None:
     """Raise ``ValueError`` naming ``source`` on any unknown model, missing array, wrong shape,
     disagreeing frame count or non-finite value."""
     if body.model not in BODY_MODELS:
@@ -154,7 +155,7 @@ def validate_body(body: BodyParams, source: str, num_frames: int | None = None) 
             raise ValueError(f"{source}: 'pose' rotation blocks are not orthonormal (error {err:.2g})")
 
 
-def load_body(path: str | os.PathLike, num_frames: int | None = None) -> BodyParams:
+def load_body(path: str | os.PathLike, num_frames: int | None = None) -> SequenceBody:
     """Read and validate ``body.npz``; ``num_frames`` (when given) must match its frame count.
 
     Optional SMPL-X arrays (face, eyes, hands, expression) are filled with zeros when absent, since
@@ -175,7 +176,7 @@ def load_body(path: str | os.PathLike, num_frames: int | None = None) -> BodyPar
     model = str(arrays.pop("model"))
     if "gender" in arrays:
         arrays["gender"] = np.asarray(str(arrays["gender"]))
-    body = BodyParams(model, arrays)
+    body = SequenceBody(model, arrays)
     if model == "smplx" and "global_orient" in arrays:
         t = arrays["global_orient"].shape[0]
         for key, size in _SMPLX_DEFAULTS.items():
@@ -184,7 +185,7 @@ def load_body(path: str | os.PathLike, num_frames: int | None = None) -> BodyPar
     return body
 
 
-def save_body(path: str | os.PathLike, body: BodyParams) -> None:
+def save_body(path: str | os.PathLike, body: SequenceBody) -> None:
     """Validate, then atomically write ``body.npz`` (float arrays stored as float32)."""
     validate_body(body, str(path))
     out = {"model": np.asarray(body.model)}
@@ -236,7 +237,7 @@ def find_model_file(model: str, gender: str = "neutral", model_dir: str | os.Pat
     )
 
 
-def require_body_model(body: BodyParams, source: str, model_dir: str | os.PathLike | None = None) -> None:
+def require_body_model(body: SequenceBody, source: str, model_dir: str | os.PathLike | None = None) -> None:
     """Raise a clear error when the body model ``body`` needs is not installed: the ``anny`` package
     for Anny, the user's model files for SMPL / SMPL-X."""
     if body.model == "anny":

@@ -29,7 +29,7 @@ import numpy as np
 from PIL import Image
 
 from gma.data.atomic import atomic_dir, atomic_write_json
-from gma.data.body_params import BodyParams, load_body, require_body_model, save_body
+from gma.data.body_params import SequenceBody, load_body, require_body_model, save_body
 from gma.data.cameras import Cameras, load_cameras, save_cameras, validate_cameras
 
 __all__ = ["SPLIT_KEYS", "Sequence", "SequenceWriter", "read_sequence"]
@@ -55,7 +55,7 @@ class Sequence:
     image_paths: list[Path]
     mask_paths: list[Path] | None  # None: the mask is the images' alpha channel
     cameras: Cameras
-    body: BodyParams
+    body: SequenceBody
     splits: dict[str, list[int]] = field(default_factory=dict)
 
     def __len__(self) -> int:
@@ -223,7 +223,7 @@ class SequenceWriter:
         (self._tmp / "masks").mkdir()
         self.count = 0
         self._cameras: Cameras | None = None
-        self._body: BodyParams | None = None
+        self._body: SequenceBody | None = None
         self._splits: dict | None = None
         self._closed = False
 
@@ -255,7 +255,7 @@ class SequenceWriter:
                              f"frames are {self.width}x{self.height}")
         self._cameras = cameras
 
-    def set_body(self, body: BodyParams) -> None:
+    def set_body(self, body: SequenceBody) -> None:
         self._body = body
 
     def set_splits(self, splits: dict[str, list[int]]) -> None:

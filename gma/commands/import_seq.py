@@ -1,0 +1,133 @@
+"""``gma import FORMAT SRC OUT``: convert a public dataset layout or a video into a GMA sequence."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def _common(p: argparse.ArgumentParser, src_help: str) -> None:
+    p.add_argument("src", help=src_help)
+    p.add_argument("out", help="output sequence directory (written atomically)")
+    p.add_argument("--downscale", type=int, default=1, help="shrink images by this integer factor")
+    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+
+
+def _range(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--start", type=int, default=0, help="first source frame")
+    p.add_argument("--end", type=int, default=None, help="stop before this source frame")
+    p.add_argument("--skip", type=int, default=1, help="keep every N-th frame")
+
+
+def _run(args: argparse.Namespace) -> int:
+    try:
+        return _import(args)
+    except FileExistsError as exc:  # the CLI reports ValueError / FileNotFoundError as one clean line
+        raise ValueError(str(exc)) from exc
+
+
+def _import(args: argparse.Namespace) -> int:
+    from gma.data import importers
+
+    kw = {"downscale": args.downscale, "overwrite": args.force}
+    if args.format == "peoplesnapshot":
+        seq = importers.import_peoplesnapshot(
+            args.src,
+            args.out,
+            poses=args.poses,
+            start=args.start,
+            end=args.end,
+            skip=args.skip,
+            test_start=args.test_start,
+            gender=args.gender,
+            smpl_dir=args.smpl_dir,
+            **kw,
+        )
+    elif args.format == "xhumans":
+        seq = importers.import_xhumans(
+            args.src, args.out, gender=args.gender, smplx_dir=args.smplx_dir, skip=args.skip, **kw
+        )
+    elif args.format == "zjumocap":
+        views = None if args.test_views is None else [int(v) for v in args.test_views.split(",") if v]
+        seq = importers.import_zjumocap(
+            args.src,
+            args.out,
+            view=args.view,
+            test_views=views,
+            test_every=args.test_every,
+            start=args.start,
+            end=args.end,
+            skip=args.skip,
+            params_dir=args.params,
+            smpl_dir=args.smpl_dir,
+            **kw,
+        )
+    else:
+        seq = importers.import_video(
+            args.src,
+            args.out,
+            body=args.body,
+            camera=args.camera,
+            alpha=args.alpha,
+            mask_video=args.mask_video,
+            mask_dir=args.mask_dir,
+            start=args.start,
+            end=args.end,
+            skip=args.skip,
+            model_dir=args.model_dir,
+            **kw,
+        )
+    counts = ", ".join(f"{k} {len(v)}" for k, v in seq.splits.items())
+    print(
+        f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body {seq.body.model} ({counts})"
+    )
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "import",
+        help="import a dataset (PeopleSnapshot, X-Humans, ZJU-MoCap) or a video",
+        description=__doc__,
+    )
+    fmt = p.add_subparsers(dest="format", metavar="FORMAT", required=True)
+
+    ps = fmt.add_parser("peoplesnapshot", help="PeopleSnapshot in InstantAvatar's layout (SMPL)")
+    _common(ps, "subject folder with cameras.npz, images/, masks/, poses.npz")
+    _range(ps)
+    ps.add_argument(
+        "--poses", default="poses.npz", help="pose file inside SRC (e.g. poses/anim_nerf_train.npz)"
+    )
+    ps.add_argument(
+        "--test-start", type=int, default=None, help="source frames from here on form the test split"
+    )
+    ps.add_argument("--gender", choices=("neutral", "male", "female"), default=None)
+    ps.add_argument("--smpl-dir", default=None, help="folder with the SMPL model files (or $GMA_SMPL_DIR)")
+
+    xh = fmt.add_parser("xhumans", help="X-Humans take or subject folder (SMPL-X)")
+    _common(xh, "a take folder (render/, SMPLX/) or a subject folder (train/Take*, test/Take*)")
+    xh.add_argument("--skip", type=int, default=1, help="keep every N-th frame")
+    xh.add_argument("--gender", choices=("neutral", "male", "female"), default=None)
+    xh.add_argument(
+        "--smplx-dir", default=None, help="folder with the SMPL-X model files (or $GMA_SMPLX_DIR)"
+    )
+
+    zj = fmt.add_parser("zjumocap", help="ZJU-MoCap subject (annots.npy, params/, mask/) (SMPL)")
+    _common(zj, "subject folder, e.g. CoreView_377")
+    _range(zj)
+    zj.add_argument("--view", type=int, default=0, help="camera used for training (monocular)")
+    zj.add_argument("--test-views", default=None, help="comma-separated cameras for the test_view split")
+    zj.add_argument("--test-every", type=int, default=30, help="test-view frames every N source frames")
+    zj.add_argument("--params", default="params", help="parameter folder (params or new_params)")
+    zj.add_argument("--smpl-dir", default=None, help="folder with the SMPL model files (or $GMA_SMPL_DIR)")
+
+    vd = fmt.add_parser("video", help="a video with user-supplied body parameters, camera and masks")
+    _common(vd, "video file (anything ffmpeg reads)")
+    _range(vd)
+    vd.add_argument("--body", required=True, help="body.npz in the sequence format (all or selected frames)")
+    vd.add_argument("--camera", required=True, help="cameras.json in the sequence format")
+    masks = vd.add_mutually_exclusive_group(required=True)
+    masks.add_argument("--alpha", action="store_true", help="masks from the video's alpha channel")
+    masks.add_argument("--mask-video", default=None, help="a video of masks, one per frame")
+    masks.add_argument("--mask-dir", default=None, help="a folder of mask images, one per frame")
+    vd.add_argument("--model-dir", default=None, help="SMPL/SMPL-X model folder when body.npz uses them")
+    p.set_defaults(func=_run)

@@ -1,0 +1,130 @@
+"""A user's own video: ``gma import video clip.mp4 OUT --body params.npz --camera cam.json``.
+
+Frames are read with imageio (ffmpeg). The person's mask comes from one of: the video's alpha channel
+(``alpha=True``; needs a codec that keeps alpha, e.g. ProRes 4444, PNG-in-MOV, VP9 WebM), a mask video
+(``mask_video``, grey or RGB, person bright), or a folder of mask images (``mask_dir``, sorted by name,
+one per video frame). Body parameters (``body.npz`` of the sequence format) and cameras
+(``cameras.json``) are given by the user, either for every video frame or for exactly the frames
+selected by ``start``/``end``/``skip``. Estimating masks and body parameters from a raw video comes later.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import imageio.v3 as iio
+import imageio_ffmpeg
+import numpy as np
+
+from gma.data.body_params import load_body, require_body_model
+from gma.data.cameras import load_cameras
+from gma.data.importers._common import frame_range, mask_from_array, write_imported
+from gma.data.sequence import IMAGE_SUFFIXES, Sequence
+
+__all__ = ["count_frames", "import_video"]
+
+
+def count_frames(path: str | os.PathLike) -> int:
+    """Number of frames in a video file (decodes it once: container frame counts are unreliable)."""
+    return sum(1 for _ in _read_frames(path, False))
+
+
+def _read_frames(path, alpha: bool) -> Iterator[np.ndarray]:
+    """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg."""
+    channels = 4 if alpha else 3
+    try:
+        gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgba" if alpha else "rgb24", bpp=channels)
+        meta = next(gen)
+    except (OSError, RuntimeError, StopIteration) as exc:
+        raise ValueError(f"{path}: cannot open as a video ({exc})") from exc
+    w, h = meta["size"]
+    try:
+        for raw in gen:
+            yield np.frombuffer(raw, np.uint8).reshape(h, w, channels)
+    finally:
+        gen.close()
+
+
+def import_video(
+    src: str | os.PathLike,
+    out: str | os.PathLike,
+    *,
+    body: str | os.PathLike,
+    camera: str | os.PathLike,
+    alpha: bool = False,
+    mask_video: str | os.PathLike | None = None,
+    mask_dir: str | os.PathLike | None = None,
+    start: int = 0,
+    end: int | None = None,
+    skip: int = 1,
+    model_dir: str | os.PathLike | None = None,
+    downscale: int = 1,
+    overwrite: bool = False,
+) -> Sequence:
+    """Import video ``src`` with user-supplied body parameters and cameras into a sequence ``out``."""
+    src = Path(src)
+    if not src.is_file():
+        raise FileNotFoundError(f"{src}: video not found")
+    if sum(x is not None and x is not False for x in (alpha or None, mask_video, mask_dir)) != 1:
+        raise ValueError("give exactly one mask source: --alpha, --mask-video or --mask-dir")
+    n = count_frames(src)
+    if n == 0:
+        raise ValueError(f"{src}: the video has no frames")
+    idx = frame_range(n, start, end, skip)
+
+    mask_files = None
+    if mask_dir is not None:
+        mask_files = sorted(p for p in Path(mask_dir).glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        if len(mask_files) != n:
+            raise ValueError(f"{mask_dir}: {len(mask_files)} mask images for {n} video frames")
+    if mask_video is not None:
+        if not Path(mask_video).is_file():
+            raise FileNotFoundError(f"{mask_video}: mask video not found")
+        m = count_frames(mask_video)
+        if m != n:
+            raise ValueError(f"{mask_video}: {m} frames, but {src} has {n}")
+
+    params = load_body(body)
+    require_body_model(params, str(body), model_dir)
+    if params.num_frames == n and len(idx) != n:
+        params = params.subset(idx)
+    elif params.num_frames != len(idx):
+        raise ValueError(
+            f"{body}: {params.num_frames} frames of body parameters, but {src} has {n} frames "
+            f"({len(idx)} selected)"
+        )
+    cams = load_cameras(camera)
+    if not cams.static:
+        if cams.K.shape[0] == n or cams.w2c.shape[0] == n:
+            if len(idx) != n:
+                cams = cams.subset(idx)
+        elif max(cams.K.shape[0], cams.w2c.shape[0]) != len(idx):
+            raise ValueError(
+                f"{camera}: per-frame cameras do not match {n} video frames ({len(idx)} selected)"
+            )
+
+    wanted = set(idx)
+
+    def frames():
+        masks = _read_frames(mask_video, False) if mask_video is not None else None
+        for i, img in enumerate(_read_frames(src, alpha)):
+            m = next(masks) if masks is not None else None
+            if i not in wanted:
+                continue
+            if alpha:
+                if img.shape[2] != 4:
+                    raise ValueError(f"{src}: the decoder returned no alpha channel")
+                mask = img[..., 3].astype(np.float32) / 255.0
+                if mask.min() == 1.0:
+                    raise ValueError(
+                        f"{src}: frame {i} alpha is fully opaque; this video has no usable alpha"
+                    )
+            elif m is not None:
+                mask = mask_from_array(m, mask_video)
+            else:
+                mask = mask_from_array(iio.imread(mask_files[i]), mask_files[i])
+            yield np.ascontiguousarray(img[..., :3]), mask
+
+    return write_imported(out, frames(), len(idx), cams, params, None, downscale, overwrite, "video")
