@@ -28,7 +28,7 @@ _BONE_RULES: tuple[tuple[str, str], ...] = (
     (r"^(upperleg|lowerleg|(left_|right_)(hip|knee))", "legs"),
     (r"^(shoulder|upperarm|lowerarm|(left_|right_)(shoulder|elbow))", "arms"),
     (r"^(root|pelvis)", "hips"),
-    (r"^(spine05|spine04)", "waist"),
+    (r"^(spine05|spine04|spine1$)", "waist"),
     (r"^(spine|clavicle|breast|(left_|right_)collar)", "chest"),
 )
 
