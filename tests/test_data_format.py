@@ -9,7 +9,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from gma.data import SequenceBody, Cameras, SequenceWriter, look_at, read_sequence
+from gma.data import Cameras, SequenceBody, SequenceWriter, look_at, read_sequence
 from gma.data.atomic import atomic_write_bytes
 from gma.data.body_params import find_model_file, load_body
 
