@@ -130,3 +130,34 @@ def test_bad_inputs_are_clear_errors(gpu):
     poser.set_surfels(uniform_surfels(8, 4))
     with pytest.raises(ValueError, match="means buffer holds"):
         poser.pose(T, *small)
+
+
+def test_anny_walk_frame_wgsl_matches_torch(gpu, anny_body):
+    """The default body, a walk frame, a morphed rest mesh, 2 surfels per face (~55k)."""
+    from gma.body.geometry import morph_vertices
+    from gma.body.gpu_posing import GpuPoser
+    from gma.body.motions import motion
+
+    b = anny_body
+    frame = motion("walk", 8, b).params(3)
+    offsets = 0.005 * torch.sin(torch.arange(b.num_vertices, dtype=torch.float32))  # a bumpy mesh layer
+    rest = morph_vertices(b.rest_vertices(frame), b.faces, offsets)
+    transforms = b.bone_transforms(frame)
+    binding = random_binding(b.num_faces, 2 * b.num_faces, seed=7)
+    poser = GpuPoser(gpu, b.faces, b.skin_indices, b.skin_weights)
+    poser.set_rest_vertices(rest)
+    poser.set_surfels(binding)
+    outs = poser.output_buffers()
+    poser.pose(transforms, *outs)
+
+    posed = linear_blend_skinning(rest, b.skin_indices, b.skin_weights, transforms)
+    np.testing.assert_allclose(poser.read_posed_vertices(), posed.numpy(), atol=ATOL, rtol=0)
+    means, quats, scales = place_surfels(posed, b.faces, binding)
+    gm, gq, gs = poser.read_surfels(*outs)
+    np.testing.assert_allclose(gm, means.numpy(), atol=ATOL, rtol=0)
+    # Anny's smallest faces (eyes, mouth interior) have edges of ~1 mm: their frames and sqrt(area) are
+    # more sensitive to the ulp-level differences of the skinned vertices (measured worst quaternion
+    # difference 2.5e-4), hence looser tolerances here than on the random meshes.
+    np.testing.assert_allclose(gs, scales.numpy(), atol=ATOL, rtol=1e-3)
+    quat_close(gq / np.linalg.norm(gq, axis=1, keepdims=True),
+               (quats / quats.norm(dim=1, keepdim=True)).numpy(), 1e-3)
