@@ -128,3 +128,13 @@ def test_geometry_on_anny_mesh(anny_body):
     n = vertex_normals(v, anny_body.faces)
     assert torch.isfinite(n).all()
     assert math.isclose(float(n.norm(dim=1).median()), 1.0, abs_tol=1e-5)
+
+
+def test_expression_basis_is_linear(anny_body):
+    b = anny_body
+    basis = b.expression_basis()
+    assert basis.shape == (52, b.num_vertices, 3)
+    e = torch.rand(52, generator=torch.Generator().manual_seed(0)) * 0.5
+    expect = b.rest_vertices({}) + torch.einsum("k,kvc->vc", e, basis)
+    torch.testing.assert_close(b.rest_vertices({"expression": e}), expect, atol=1e-5, rtol=0)
+    torch.testing.assert_close(b.bone_transforms({"expression": e}), b.bone_transforms({}), atol=1e-6, rtol=0)

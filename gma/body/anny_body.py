@@ -137,6 +137,14 @@ class AnnyBody(BodyModel):
         except ValueError:
             raise ValueError(f"Anny has no bone {name!r}") from None
 
+    def expression_basis(self) -> torch.Tensor:
+        """[52, V, 3] per-facial-action vertex offsets (m): rest vertices are linear in the expression,
+        rest(shape, e) = rest(shape, 0) + Σ_k e_k · basis[k], and facial actions move no bone — so a
+        viewer can blend expressions on the GPU without re-running the rest model."""
+        m = self.anny_model
+        rows = [i for i, label in enumerate(m.blendshape_labels) if label.startswith("facial_action:")]
+        return m.blendshapes[rows].float()
+
     # -- posing -------------------------------------------------------------------------------------
     def _rest_model(self, shape: torch.Tensor, expression: torch.Tensor) -> dict:
         """Anny's rest model (rest vertices, rest bone poses) for [B, 6] shape and [B, 52] expression,
