@@ -78,6 +78,25 @@ class GpuContext:
         return "subgroup" in self.features
 
     @property
+    def subgroup_size(self) -> int:
+        """Lanes per subgroup as a probe kernel sees them (0 without the subgroup feature)."""
+        if not self.has_subgroups:
+            return 0
+        size = getattr(self, "_subgroup_size", None)
+        if size is None:
+            probe = self.compute_pipeline("common/subgroup_probe.wgsl")
+            out = self.buffer(4, "subgroup_probe")
+            enc = self.device.create_command_encoder()
+            cp = enc.begin_compute_pass()
+            cp.set_pipeline(probe)
+            cp.set_bind_group(0, self.bind_group(probe, [out]))
+            cp.dispatch_workgroups(1)
+            cp.end()
+            self.submit(enc)
+            size = self._subgroup_size = int(self.read(out, np.uint32, 1)[0])
+        return size
+
+    @property
     def has_timestamps(self) -> bool:
         return "timestamp-query" in self.features
 
@@ -107,16 +126,19 @@ class GpuContext:
             self._pipelines[key] = pipeline
         return pipeline
 
-    def bind_group(self, pipeline: wgpu.GPUComputePipeline, buffers: list, group: int = 0):
-        """A bind group binding ``buffers[i]`` at ``@binding(i)`` (entries may be (buffer, offset,
-        size) tuples to bind a range)."""
+    def bind_group(self, pipeline: wgpu.GPUComputePipeline, resources: list | dict, group: int = 0):
+        """A bind group binding ``resources[i]`` at ``@binding(i)`` (a list), or each ``{binding:
+        resource}`` (a dict). A resource is a buffer, a (buffer, offset, size) range, or a texture view."""
+        items = resources.items() if isinstance(resources, dict) else enumerate(resources)
         entries = []
-        for i, b in enumerate(buffers):
+        for i, b in items:
             if isinstance(b, tuple):
                 buf, offset, size = b
                 entries.append({"binding": i, "resource": {"buffer": buf, "offset": offset, "size": size}})
-            else:
+            elif isinstance(b, wgpu.GPUBuffer):
                 entries.append({"binding": i, "resource": {"buffer": b, "offset": 0, "size": b.size}})
+            else:
+                entries.append({"binding": i, "resource": b})
         return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
 
     # -- buffers ------------------------------------------------------------------------------------

@@ -1,5 +1,7 @@
 """Loading WGSL: one file per pass, ``#include "common/x.wgsl"`` resolved by name, compile-time
-defines prepended as ``const`` declarations, and compile errors reported with numbered source.
+defines prepended as ``const`` declarations, ``#if NAME`` / ``#else`` / ``#endif`` blocks kept or
+dropped by a define's truth (for variants that change bindings or entry-point builtins, which WGSL
+itself cannot express), and compile errors reported with numbered source.
 
 The sources are found in one place: ``gma/_shaders/wgsl`` inside an installed wheel, otherwise the
 checkout's top-level ``shaders/wgsl``.
@@ -14,6 +16,9 @@ from pathlib import Path
 import wgpu
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
+_IF = re.compile(r"^\s*#if\s+(!?)(\w+)\s*$")
+_ELSE = re.compile(r"^\s*#else\s*$")
+_ENDIF = re.compile(r"^\s*#endif\s*$")
 
 
 def shader_root() -> Path:
@@ -45,6 +50,29 @@ def _format_define(name: str, value) -> str:
     if isinstance(value, float):
         return f"const {name}: f32 = {value!r};"
     raise TypeError(f"shader define {name} has unsupported type {type(value).__name__}")
+
+
+def _select_conditionals(lines: list[str], defines: dict, rel: str) -> list[str]:
+    """Keep the lines of ``#if NAME`` / ``#if !NAME`` blocks whose condition holds (nesting allowed)."""
+    out: list[str] = []
+    stack: list[bool] = []  # per open block: is its current branch active?
+    for line in lines:
+        if m := _IF.match(line):
+            value = bool(defines.get(m.group(2), False)) != (m.group(1) == "!")
+            stack.append(value)
+        elif _ELSE.match(line):
+            if not stack:
+                raise ValueError(f"{rel}: #else without #if")
+            stack[-1] = not stack[-1]
+        elif _ENDIF.match(line):
+            if not stack:
+                raise ValueError(f"{rel}: #endif without #if")
+            stack.pop()
+        elif all(stack):
+            out.append(line)
+    if stack:
+        raise ValueError(f"{rel}: #if without #endif")
+    return out
 
 
 def number_lines(source: str) -> str:
@@ -84,8 +112,12 @@ class ShaderLibrary:
                 out.extend(expand(m.group(1), stack + (name,)) if m else [line])
             return out
 
+        body = _select_conditionals(expand(rel, ()), defines or {}, rel)
+        # Directives such as `enable subgroups;` must precede every declaration, defines included.
+        directives = sorted({line.strip() for line in body if line.lstrip().startswith("enable ")})
+        body = [line for line in body if not line.lstrip().startswith("enable ")]
         header = [_format_define(k, v) for k, v in sorted((defines or {}).items())]
-        return "\n".join(header + expand(rel, ()))
+        return "\n".join(directives + header + body)
 
     def module(self, device: wgpu.GPUDevice, rel: str, defines: dict | None = None) -> wgpu.GPUShaderModule:
         code = self.source(rel, defines)

@@ -1,0 +1,18 @@
+"""The 2D Gaussian surfel renderer: WGSL passes through wgpu, a torch API and a torch reference."""
+
+from gma.render.api import RenderOutput, rasterize
+from gma.render.camera import Camera
+from gma.render.rasterizer import ForwardState, SurfelRasterizer, read_outputs
+from gma.render.reference import rasterize_reference
+from gma.render.surfels import SurfelBuffers
+
+__all__ = [
+    "Camera",
+    "ForwardState",
+    "RenderOutput",
+    "SurfelBuffers",
+    "SurfelRasterizer",
+    "rasterize",
+    "rasterize_reference",
+    "read_outputs",
+]

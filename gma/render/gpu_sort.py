@@ -1,0 +1,77 @@
+"""Stable GPU radix sort of u32 keys with u32 values (4-bit digits, count/scan/scatter per digit)."""
+
+from __future__ import annotations
+
+import numpy as np
+import wgpu
+
+from gma.gpu import GpuContext
+
+SORT_BLOCK = 2048  # keys per workgroup; mirrors shaders/wgsl/common/sort_types.wgsl
+RADIX_BITS = 4
+
+
+def sort_blocks(count: int) -> int:
+    return max(1, (count + SORT_BLOCK - 1) // SORT_BLOCK)
+
+
+def dispatch_info(count: int, per_group: int) -> np.ndarray:
+    """Packed ``DispatchInfo`` for ``count`` elements at ``per_group`` elements per workgroup."""
+    return np.array([max(1, (count + per_group - 1) // per_group), 1, 1, count], np.uint32)
+
+
+class RadixSorter:
+    """Sorts ``count`` (key, value) pairs in place on the GPU, stably, by the low ``bits`` of the key.
+
+    The element count comes from a ``DispatchInfo`` buffer (workgroups for the count/scatter passes and
+    the count itself), so it can be produced by an earlier GPU pass without a readback; the dispatches
+    are then indirect. ``capacity`` bounds the count and sizes the scratch buffers.
+    """
+
+    def __init__(self, ctx: GpuContext):
+        self.ctx = ctx
+
+    def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
+               values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None) -> None:
+        """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside)."""
+        ctx = self.ctx
+        passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
+        passes += passes % 2  # an even number of passes leaves the result in the caller's buffers
+        hist = ctx.buffer(16 * 4 * sort_blocks(capacity), "sort.hist")
+        keys_tmp = ctx.buffer(4 * capacity, "sort.keys_tmp")
+        vals_tmp = ctx.buffer(4 * capacity, "sort.vals_tmp")
+        src, dst = (keys, values), (keys_tmp, vals_tmp)
+        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4 * i}) for i in range(passes)]
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl")
+        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": 4 * i}) for i in range(passes)]
+        scan_bg = ctx.bind_group(scan_p, [info, hist])
+        for i in range(passes):
+            cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)
+            cp.set_pipeline(count_p[i])
+            cp.set_bind_group(0, ctx.bind_group(count_p[i], [info, src[0], hist]))
+            cp.dispatch_workgroups_indirect(info, 0)
+            cp.set_pipeline(scan_p)
+            cp.set_bind_group(0, scan_bg)
+            cp.dispatch_workgroups(1)
+            cp.set_pipeline(scatter_p[i])
+            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]]))
+            cp.dispatch_workgroups_indirect(info, 0)
+            cp.end()
+            src, dst = dst, src
+
+    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32):
+        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
+        ctx = self.ctx
+        keys = np.ascontiguousarray(keys, np.uint32)
+        n = keys.size
+        values = np.arange(n, dtype=np.uint32) if values is None else np.ascontiguousarray(values, np.uint32)
+        if n == 0:
+            return keys.copy(), values.copy()
+        kb = ctx.upload(keys, "keys")
+        vb = ctx.upload(values, "values")
+        info = ctx.upload(dispatch_info(n, SORT_BLOCK), "sort.info",
+                          wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
+        enc = ctx.device.create_command_encoder()
+        self.encode(enc, info, kb, vb, n, bits)
+        ctx.submit(enc)
+        return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)

@@ -1,0 +1,252 @@
+"""The forward surfel rasterizer: projection, depth sort, tile binning, tile sort, tiled compositing.
+
+Every pass runs on the GPU; the only host round trip in :meth:`SurfelRasterizer.forward` is reading the
+number of tile intersections so that the intersection buffers are sized exactly. The texture path
+(:meth:`render_to_texture`) avoids even that by using a capacity that grows from earlier frames.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import wgpu
+
+from gma.gpu import GpuContext, PassTimer
+from gma.render.camera import Camera
+from gma.render.gpu_scan import ExclusiveScan
+from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
+from gma.render.layouts import render_params, tile_grid
+from gma.render.surfels import SurfelBuffers
+
+UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
+INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
+MAX_WORKGROUPS = 65535
+BATCH_MIN = 32
+
+
+@dataclass
+class ProjectionState:
+    """GPU buffers written by projection, depth sort and the tile-count scan (by surfel, or depth order)."""
+
+    params: wgpu.GPUBuffer        # RenderParams uniform
+    projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
+    tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
+    pixel_bounds: wgpu.GPUBuffer  # [N] vec4<f32> screen bounds of alpha >= 1/255
+    tile_counts: wgpu.GPUBuffer   # [N]
+    depth_keys: wgpu.GPUBuffer    # [N] sorted
+    depth_order: wgpu.GPUBuffer   # [N] surfel ids, front to back
+    isect_offsets: wgpu.GPUBuffer  # [N] exclusive scan of tile counts in depth order
+    stats: wgpu.GPUBuffer         # [4] u32: [0] intersections wanted
+    sort_info: wgpu.GPUBuffer     # DispatchInfo of the intersection sort (count clamped to capacity)
+    elem_info: wgpu.GPUBuffer     # DispatchInfo of per-intersection passes
+
+
+@dataclass
+class ForwardState:
+    """Exactly what the backward pass needs from a forward render, plus the output images."""
+
+    camera: Camera
+    num_surfels: int
+    channels: int
+    num_isects: int
+    proj: ProjectionState
+    isect_ids: wgpu.GPUBuffer     # tile-sorted surfel ids
+    tile_ranges: wgpu.GPUBuffer   # [num_tiles] vec2<u32>
+    background: wgpu.GPUBuffer    # [C]
+    color: wgpu.GPUBuffer         # [H, W, C]
+    alpha: wgpu.GPUBuffer         # [H, W]
+    normal: wgpu.GPUBuffer        # [H, W, 3]
+    depth: wgpu.GPUBuffer         # [H, W]
+    final_t: wgpu.GPUBuffer       # [H, W]
+    last: wgpu.GPUBuffer          # [H, W] contributors per pixel (u32)
+
+
+def _bits_for(count: int) -> int:
+    return max(1, math.ceil(math.log2(max(count, 2))))
+
+
+class SurfelRasterizer:
+    """Renders :class:`SurfelBuffers` for a :class:`Camera`. Pipelines are compiled once per context
+    and variant (channel count, batch size); a frame compiles nothing."""
+
+    def __init__(self, ctx: GpuContext):
+        self.ctx = ctx
+        self.sorter = RadixSorter(ctx)
+        self.scan = ExclusiveScan(ctx)
+        self.isect_capacity_hint = 1 << 16
+        # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
+        # on GPUs those reads are broadcasts and the plain loop is simpler.
+        self.use_subgroups = ctx.has_subgroups and ctx.is_software and 1 <= ctx.subgroup_size <= BATCH_MIN
+        self.last_timings: dict[str, float] = {}
+
+    # -- variants -----------------------------------------------------------------------------------
+    def raster_defines(self, channels: int) -> dict:
+        """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel +
+        16 B per 4 channels), and the subgroup path on CPU adapters (see rasterize_core.wgsl)."""
+        limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
+        batch = 256
+        while batch > 32 and batch * (64 + 16 * ((channels + 3) // 4)) + 64 > limit:
+            batch //= 2
+        defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1}
+        if self.use_subgroups and channels <= 4:
+            defines.update(USE_SUBGROUPS=True, SG=self.ctx.subgroup_size)
+        return defines
+
+    # -- passes -------------------------------------------------------------------------------------
+    def _dispatch(self, encoder, pipeline, buffers, groups, name, timer):
+        cp = encoder.begin_compute_pass(timestamp_writes=timer.writes(name) if timer else None)
+        cp.set_pipeline(pipeline)
+        cp.set_bind_group(0, self.ctx.bind_group(pipeline, buffers))
+        if isinstance(groups, wgpu.GPUBuffer):
+            cp.dispatch_workgroups_indirect(groups, 0)
+        else:
+            cp.dispatch_workgroups(*groups)
+        cp.end()
+
+    def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
+                timer: PassTimer | None = None) -> ProjectionState:
+        """Encode projection, depth sort and the scan of tile counts in depth order."""
+        ctx, n = self.ctx, surfels.count
+        if n > MAX_WORKGROUPS * 256:
+            raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
+        params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
+                               surfels.channels)
+        st = ProjectionState(
+            params=ctx.upload(params, "params", UNIFORM),
+            projected=ctx.buffer(64 * n, "projected"),
+            tile_rects=ctx.buffer(16 * n, "tile_rects"),
+            pixel_bounds=ctx.buffer(16 * n, "pixel_bounds"),
+            tile_counts=ctx.buffer(4 * n, "tile_counts"),
+            depth_keys=ctx.buffer(4 * n, "depth_keys"),
+            depth_order=ctx.buffer(4 * n, "depth_order"),
+            isect_offsets=ctx.buffer(4 * n, "isect_offsets"),
+            stats=ctx.buffer(16, "stats"),
+            sort_info=ctx.buffer(16, "isect_sort.info", INDIRECT),
+            elem_info=ctx.buffer(16, "isect_elem.info", INDIRECT),
+        )
+        if n == 0:
+            return st
+        p = ctx.compute_pipeline("render/project_fwd.wgsl")
+        self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
+                                    st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
+                                    st.depth_order, st.pixel_bounds], ((n + 255) // 256, 1, 1), "project", timer)
+        depth_info = ctx.upload(dispatch_info(n, SORT_BLOCK), "depth_sort.info", INDIRECT)
+        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, 32, timer)
+        self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
+        self._setup(encoder, st, timer)
+        return st
+
+    def _setup(self, encoder, st: ProjectionState, timer) -> None:
+        setup = self.ctx.compute_pipeline("render/isect_setup.wgsl")
+        self._dispatch(encoder, setup, [st.params, st.isect_offsets, st.tile_counts, st.depth_order,
+                                        st.sort_info, st.elem_info, st.stats], (1, 1, 1), "bin", timer)
+
+    def bin_and_rasterize(self, encoder, surfels: SurfelBuffers, camera: Camera, st: ProjectionState,
+                          capacity: int, background: wgpu.GPUBuffer, target, timer: PassTimer | None = None):
+        """Encode intersection emission, the tile sort, tile ranges and the rasterizer. ``target`` is a
+        list of output buffers (buffer variant) or a GPUTextureView (texture variant)."""
+        ctx, n = self.ctx, surfels.count
+        tx, ty = tile_grid(camera.width, camera.height)
+        cap = max(capacity, 1)
+        isect_tiles = ctx.buffer(4 * cap, "isect_tiles")
+        isect_ids = ctx.buffer(4 * cap, "isect_ids")
+        ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
+        if n > 0:
+            self._setup(encoder, st, timer)  # again: the capacity may have been raised since projection
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl")
+            self._dispatch(encoder, emit, [st.params, st.depth_order, st.isect_offsets, st.tile_counts,
+                                           st.tile_rects, isect_tiles, isect_ids], ((n + 255) // 256, 1, 1),
+                           "bin", timer)
+            self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
+            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")
+            self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges], st.elem_info, "bin", timer)
+        defines = self.raster_defines(surfels.channels)
+        empty = ctx.buffer(64, "empty")
+        inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
+        if isinstance(target, wgpu.GPUTextureView):
+            raster = ctx.compute_pipeline("render/rasterize_texture.wgsl", defines)
+            resources = dict(enumerate(inputs + [target]))
+        else:
+            raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", defines)
+            resources = dict(enumerate(inputs + list(target)))
+        if defines["USE_SUBGROUPS"]:
+            resources[12] = st.pixel_bounds if n else empty
+        self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
+        return isect_ids, ranges
+
+    # -- public entry points ------------------------------------------------------------------------
+    def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
+                timer: PassTimer | None = None) -> ForwardState:
+        """Render into freshly allocated output buffers (read them with :func:`read_outputs`).
+
+        Two submissions: projection/depth sort/scan, then (after reading the intersection count, the
+        one host round trip) binning, tile sort and rasterization into exactly sized buffers."""
+        ctx, n, c = self.ctx, surfels.count, surfels.channels
+        bg = np.zeros(c, np.float32) if background is None else np.asarray(background, np.float32)
+        enc = ctx.device.create_command_encoder()
+        st = self.project(enc, surfels, camera, 0, timer)
+        ctx.submit(enc)
+        num_isects = int(ctx.read(st.stats, np.uint32, 1)[0]) if n else 0
+        ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
+        hw = camera.width * camera.height
+        outputs = [ctx.buffer(4 * hw * c, "out.color"), ctx.buffer(4 * hw, "out.alpha"),
+                   ctx.buffer(12 * hw, "out.normal"), ctx.buffer(4 * hw, "out.depth"),
+                   ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")]
+        background_buf = ctx.upload(bg, "background")
+        enc = ctx.device.create_command_encoder()
+        isect_ids, ranges = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
+                                                   outputs, timer)
+        if timer:
+            timer.resolve(enc)
+        ctx.submit(enc)
+        self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
+        return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *outputs)
+
+    def render_to_texture(self, surfels: SurfelBuffers, camera: Camera, view: wgpu.GPUTextureView,
+                          background: wgpu.GPUBuffer, timer: PassTimer | None = None) -> ProjectionState:
+        """Render into an rgba8unorm storage texture in one submission, with no readback. Intersections
+        beyond ``isect_capacity_hint`` are dropped; call :meth:`grow_capacity` with the returned state
+        from time to time (it reads 4 bytes) to adapt the capacity."""
+        enc = self.ctx.device.create_command_encoder()
+        cap = self.isect_capacity_hint
+        st = self.project(enc, surfels, camera, cap, timer)
+        self.bin_and_rasterize(enc, surfels, camera, st, cap, background, view, timer)
+        if timer:
+            timer.resolve(enc)
+        self.ctx.submit(enc)
+        return st
+
+    def grow_capacity(self, st: ProjectionState) -> bool:
+        """Raise the capacity hint to what a frame needed; True when that frame had dropped work."""
+        wanted = int(self.ctx.read(st.stats, np.uint32, 1)[0])
+        if wanted > self.isect_capacity_hint:
+            self.isect_capacity_hint = int(wanted * 1.25)
+            return True
+        return False
+
+
+CAPACITY_OFFSET = 116  # byte offset of RenderParams.isect_capacity
+
+
+@dataclass
+class ImageOutputs:
+    """Host copies of a forward render: ``color`` [H, W, C], ``alpha`` [H, W, 1], ``normal`` [H, W, 3],
+    ``depth`` [H, W, 1] (float32 numpy)."""
+
+    color: np.ndarray
+    alpha: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+
+
+def read_outputs(ctx: GpuContext, state: ForwardState) -> ImageOutputs:
+    h, w, c = state.camera.height, state.camera.width, state.channels
+    f32 = np.float32
+    return ImageOutputs(
+        color=ctx.read(state.color, f32, h * w * c).reshape(h, w, c),
+        alpha=ctx.read(state.alpha, f32, h * w).reshape(h, w, 1),
+        normal=ctx.read(state.normal, f32, h * w * 3).reshape(h, w, 3),
+        depth=ctx.read(state.depth, f32, h * w).reshape(h, w, 1),
+    )

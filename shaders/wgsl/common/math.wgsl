@@ -1,0 +1,19 @@
+// Small math helpers shared by several passes.
+
+// Rotation matrix of quaternion q = (w, x, y, z), normalised here; columns are the rotated axes.
+fn quat_to_mat3(q_in: vec4<f32>) -> mat3x3<f32> {
+    let q = q_in * inverseSqrt(dot(q_in, q_in));
+    let w = q.x;
+    let x = q.y;
+    let y = q.z;
+    let z = q.w;
+    return mat3x3<f32>(
+        vec3<f32>(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
+        vec3<f32>(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),
+        vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
+    );
+}
+
+fn ceil_div(a: u32, b: u32) -> u32 {
+    return (a + b - 1u) / b;
+}

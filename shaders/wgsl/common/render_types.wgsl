@@ -1,0 +1,42 @@
+// Structs and constants shared by the render passes. The Python side mirrors these layouts in
+// gma/render/layouts.py; tests/test_render_layouts.py checks that both agree.
+
+const TILE_SIZE: u32 = 16u;
+const ALPHA_THRESHOLD: f32 = 0.003921569;   // 1/255: contributions below are skipped
+const MAX_ALPHA: f32 = 0.999;
+const TRANSMITTANCE_EPS: f32 = 1e-4;          // compositing stops before T would reach this
+const NEAR_PLANE: f32 = 0.01;
+const CULLED_KEY: u32 = 0xffffffffu;
+
+// Per-frame parameters (uniform, 128 bytes).
+struct RenderParams {
+    w2c_r0: vec4<f32>,          // rows of the world->camera [R | t]
+    w2c_r1: vec4<f32>,
+    w2c_r2: vec4<f32>,
+    k_r0: vec4<f32>,            // rows of the intrinsics K (w unused)
+    k_r1: vec4<f32>,
+    k_r2: vec4<f32>,
+    image_size: vec2<u32>,      // width, height in pixels
+    tile_grid: vec2<u32>,       // tiles in x, tiles in y
+    num_surfels: u32,
+    isect_capacity: u32,        // size of the intersection buffers
+    num_channels: u32,
+    _pad: u32,
+};
+
+// One projected surfel as the rasterizer needs it (64 bytes). T is the 3x3 ray transform
+// K [R s_u t_u, R s_v t_v, mu_c]; rows are stored with the projected centre and opacity in w.
+struct ProjectedSurfel {
+    t0: vec4<f32>,              // T row 0, mu2d.x
+    t1: vec4<f32>,              // T row 1, mu2d.y
+    t2: vec4<f32>,              // T row 2, opacity
+    normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth
+};
+
+// Indirect-dispatch arguments followed by the element count they were derived from (16 bytes).
+struct DispatchInfo {
+    groups_x: u32,
+    groups_y: u32,
+    groups_z: u32,
+    count: u32,
+};

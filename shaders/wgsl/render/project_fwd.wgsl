@@ -1,0 +1,110 @@
+// Projection: one thread per surfel. Culls, builds the ray transform T, the projected centre, the
+// camera-facing normal and depth, the screen rectangle of tiles the surfel can touch with alpha >= 1/255,
+// and the depth key for the global depth sort.
+#include "common/render_types.wgsl"
+#include "common/math.wgsl"
+
+@group(0) @binding(0) var<uniform> params: RenderParams;
+@group(0) @binding(1) var<storage, read> means: array<f32>;        // [N, 3]
+@group(0) @binding(2) var<storage, read> quats: array<f32>;        // [N, 4] (w, x, y, z)
+@group(0) @binding(3) var<storage, read> scales: array<f32>;       // [N, 2]
+@group(0) @binding(4) var<storage, read> opacities: array<f32>;    // [N]
+@group(0) @binding(5) var<storage, read_write> projected: array<ProjectedSurfel>;  // [N]
+@group(0) @binding(6) var<storage, read_write> tile_rects: array<vec4<u32>>;      // [N] x0, y0, x1, y1 (incl.)
+@group(0) @binding(7) var<storage, read_write> tile_counts: array<u32>;           // [N]
+@group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
+@group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
+@group(0) @binding(10) var<storage, read_write> pixel_bounds: array<vec4<f32>>;   // [N] lo.xy, hi.xy
+
+fn cull(i: u32) {
+    tile_counts[i] = 0u;
+    depth_keys[i] = CULLED_KEY;
+    surfel_ids[i] = i;
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= params.num_surfels {
+        return;
+    }
+    let mean = vec3<f32>(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
+    let opacity = opacities[i];
+    let r0 = params.w2c_r0;
+    let r1 = params.w2c_r1;
+    let r2 = params.w2c_r2;
+    let mu_c = vec3<f32>(dot(r0.xyz, mean) + r0.w, dot(r1.xyz, mean) + r1.w, dot(r2.xyz, mean) + r2.w);
+    if mu_c.z <= NEAR_PLANE || opacity < ALPHA_THRESHOLD {
+        cull(i);
+        return;
+    }
+    let rot = quat_to_mat3(vec4<f32>(quats[4u * i], quats[4u * i + 1u], quats[4u * i + 2u], quats[4u * i + 3u]));
+    let w2c = transpose(mat3x3<f32>(r0.xyz, r1.xyz, r2.xyz));
+    let tu = w2c * rot[0] * scales[2u * i];
+    let tv = w2c * rot[1] * scales[2u * i + 1u];
+    var normal = w2c * rot[2];
+    if dot(normal, mu_c) > 0.0 {
+        normal = -normal;
+    }
+    // T = K * [tu, tv, mu_c]; column j of T is K times column j.
+    let k = transpose(mat3x3<f32>(params.k_r0.xyz, params.k_r1.xyz, params.k_r2.xyz));
+    let c0 = k * tu;
+    let c1 = k * tv;
+    let c2 = k * mu_c;
+    let t0 = vec3<f32>(c0.x, c1.x, c2.x);
+    let t1 = vec3<f32>(c0.y, c1.y, c2.y);
+    let t2 = vec3<f32>(c0.z, c1.z, c2.z);
+
+    // Projected centre: centre of the image conic of the unit circle (dual conic T diag(1,1,-1) T^T).
+    let denom = t2.x * t2.x + t2.y * t2.y - t2.z * t2.z;
+    if denom == 0.0 {
+        cull(i);
+        return;
+    }
+    let f = vec3<f32>(1.0, 1.0, -1.0) / denom;
+    let mu2d = vec2<f32>(dot(f, t0 * t2), dot(f, t1 * t2));
+
+    // Screen bounds: alpha = o exp(-sigma) >= 1/255 needs sigma <= ln(255 o). Sigma is the minimum of
+    // (u^2+v^2)/2 (inside the circle of radius^2 = 2 ln(255 o) on the surfel) and |x - mu2d|^2 (inside a
+    // disc of radius sqrt(ln(255 o)) pixels). The box is the union of both, plus a small safety margin.
+    let level = log(255.0 * opacity);
+    let r2u = 2.0 * level;
+    let disc = sqrt(level) + 0.01;
+    var lo = mu2d - vec2<f32>(disc);
+    var hi = mu2d + vec2<f32>(disc);
+    let d = vec3<f32>(r2u, r2u, -1.0);
+    let denom_r = dot(d, t2 * t2);
+    // The image of the circle is a bounded ellipse only when denom_r < 0 (the circle lies entirely in
+    // front of the camera plane); otherwise it is a parabola or hyperbola.
+    if denom_r < 0.0 {
+        let fr = d / denom_r;
+        let m = vec2<f32>(dot(fr, t0 * t2), dot(fr, t1 * t2));
+        let half_ext = sqrt(max(m * m - vec2<f32>(dot(fr, t0 * t0), dot(fr, t1 * t1)), vec2<f32>(0.0)));
+        let margin = 0.01 + 1e-4 * abs(m);
+        lo = min(lo, m - half_ext - margin);
+        hi = max(hi, m + half_ext + margin);
+    } else {
+        // The circle reaches the camera plane: its image is unbounded, so the whole image may be hit.
+        lo = vec2<f32>(-1.0);
+        hi = vec2<f32>(params.image_size) + 1.0;
+    }
+    // Pixels whose centres (p + 0.5) lie inside [lo, hi].
+    let size = vec2<f32>(params.image_size);
+    let p_lo = max(ceil(lo - 0.5), vec2<f32>(0.0));
+    let p_hi = min(floor(hi - 0.5), size - 1.0);
+    if any(p_lo > p_hi) || any(p_hi < vec2<f32>(0.0)) || any(p_lo > size - 1.0) {
+        cull(i);
+        return;
+    }
+    let tile_lo = vec2<u32>(p_lo) / TILE_SIZE;
+    let tile_hi = vec2<u32>(p_hi) / TILE_SIZE;
+    let extent = tile_hi - tile_lo + 1u;
+
+    projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
+                                   vec4<f32>(normal, mu_c.z));
+    tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
+    pixel_bounds[i] = vec4<f32>(lo, hi);
+    tile_counts[i] = extent.x * extent.y;
+    depth_keys[i] = bitcast<u32>(mu_c.z);   // positive floats order like their bit patterns
+    surfel_ids[i] = i;
+}

@@ -1,0 +1,175 @@
+// Tiled front-to-back compositing shared by the buffer and texture variants of the forward rasterizer.
+// One workgroup per 16x16 tile, one thread per pixel. Surfels are staged BATCH at a time in workgroup
+// memory; the tile stops early once every pixel is saturated. Defines: CHANNELS, BATCH, USE_SUBGROUPS
+// and SG (the subgroup size) for the subgroup variant.
+#include "common/render_types.wgsl"
+#include "common/math.wgsl"
+
+@group(0) @binding(0) var<uniform> params: RenderParams;
+@group(0) @binding(1) var<storage, read> projected: array<ProjectedSurfel>;   // [N]
+@group(0) @binding(2) var<storage, read> colors: array<f32>;                  // [N, CHANNELS]
+@group(0) @binding(3) var<storage, read> isect_ids: array<u32>;               // tile-sorted
+@group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
+@group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
+#if USE_SUBGROUPS
+@group(0) @binding(12) var<storage, read> pixel_bounds: array<vec4<f32>>;     // [N] lo.xy, hi.xy
+var<workgroup> batch_bounds: array<vec4<f32>, BATCH>;
+#endif
+
+var<workgroup> batch_surf: array<ProjectedSurfel, BATCH>;
+// Colours travel as CHUNKS vec4s per surfel (channels padded with zeros to a multiple of 4).
+const CHUNKS: u32 = (CHANNELS + 3u) / 4u;
+var<workgroup> batch_color: array<vec4<f32>, BATCH * CHUNKS>;
+var<workgroup> done_count: atomic<u32>;
+
+struct PixelResult {
+    color: array<vec4<f32>, CHUNKS>,  // without background; channel c is color[c / 4][c % 4]
+    normal: vec3<f32>,
+    depth: f32,
+    transmittance: f32,            // final T
+    last: u32,                     // one past the last contributing intersection index (0: none)
+}
+
+// Alpha of surfel s at pixel centre px (the DESIGN.md contract, steps 2-3).
+fn surfel_alpha(s: ProjectedSurfel, px: vec2<f32>) -> f32 {
+    let h_u = px.x * s.t2.xyz - s.t0.xyz;
+    let h_v = px.y * s.t2.xyz - s.t1.xyz;
+    let p = cross(h_u, h_v);
+    let d = px - vec2<f32>(s.t0.w, s.t1.w);
+    var sigma = dot(d, d);
+    if p.z != 0.0 {
+        let uv = p.xy / p.z;
+        sigma = min(sigma, 0.5 * dot(uv, uv));
+    }
+    return min(MAX_ALPHA, s.t2.w * exp(-sigma));
+}
+
+// Composite surfel `s` (with colours `col`) into the pixel state; false once the pixel is saturated.
+fn blend(s: ProjectedSurfel, px: vec2<f32>, slot: u32, index: u32, result: ptr<function, PixelResult>,
+         T: ptr<function, f32>) -> bool {
+    let alpha = surfel_alpha(s, px);
+    if alpha < ALPHA_THRESHOLD {
+        return true;
+    }
+    let next_T = *T * (1.0 - alpha);
+    if next_T <= TRANSMITTANCE_EPS {
+        return false;
+    }
+    let w = alpha * *T;
+    for (var c = 0u; c < CHUNKS; c++) {
+        (*result).color[c] += w * batch_color[slot * CHUNKS + c];
+    }
+    (*result).normal += w * s.normal_depth.xyz;
+    (*result).depth += w * s.normal_depth.w;
+    *T = next_T;
+    (*result).last = index;
+    return true;
+}
+
+// Pixel of thread `lid` in its tile. Consecutive threads (a subgroup) cover 4x2 blocks rather than
+// rows, so that small surfels miss whole subgroups more often.
+fn tile_pixel(lid: u32) -> vec2<u32> {
+    return vec2<u32>((lid & 3u) | ((lid >> 1u) & 12u), ((lid >> 2u) & 1u) | ((lid >> 4u) & 14u));
+}
+
+fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32) -> PixelResult {
+    var result: PixelResult;
+    var T = 1.0;
+    var done = !inside;
+    if lid == 0u {
+        atomicStore(&done_count, 0u);
+    }
+    workgroupBarrier();
+    if done {
+        atomicAdd(&done_count, 1u);
+    }
+    let range = ranges[tile];
+    let num_batches = ceil_div(range.y - range.x, BATCH);
+    for (var b = 0u; b < num_batches; b++) {
+        // Uniform exit: also the barrier that protects the batch buffers from being overwritten early.
+        if workgroupUniformLoad(&done_count) >= TILE_SIZE * TILE_SIZE {
+            break;
+        }
+        let base = range.x + b * BATCH;
+        if lid < BATCH && base + lid < range.y {
+            let sid = isect_ids[base + lid];
+            batch_surf[lid] = projected[sid];
+#if USE_SUBGROUPS
+            batch_bounds[lid] = pixel_bounds[sid];
+#endif
+            for (var c = 0u; c < CHUNKS; c++) {
+                var v = vec4<f32>(0.0);
+                for (var e = 0u; e < 4u; e++) {
+                    if 4u * c + e < CHANNELS {
+                        v[e] = colors[sid * CHANNELS + 4u * c + e];
+                    }
+                }
+                batch_color[lid * CHUNKS + c] = v;
+            }
+        }
+        workgroupBarrier();
+        let was_done = done;
+        let m = min(BATCH, range.y - base);
+#if USE_SUBGROUPS
+        // CPU drivers (lavapipe) run a subgroup as one SIMD register and turn every workgroup-memory read
+        // with a loop-varying index into one scalar load per lane, and every branch into masked work.
+        // So each lane reads one surfel, the subgroup passes them around with shuffles, and the blend
+        // is written branch-free with selects. Same arithmetic as blend() above.
+        // This path assumes CHUNKS == 1 (at most 4 channels): the driver mishandles shuffles of
+        // private-array elements, so colours stay in one vec4 register here.
+        var acc_color = vec4<f32>(0.0);
+        var acc_nd = vec4<f32>(0.0);
+        var last = 0u;
+        // The subgroup's pixels form a small block (see tile_pixel); a surfel whose screen bounds miss
+        // the block is skipped by the whole subgroup at once.
+        let block_lo = subgroupMin(px);
+        let block_hi = subgroupMax(px);
+        for (var j = 0u; j < m; j += SG) {
+            let slot = min(j + sg_lane, m - 1u);
+            let mine = batch_surf[slot];
+            let mine_col = batch_color[slot];
+            let mine_bounds = batch_bounds[slot];
+            if subgroupAll(done) {
+                continue;
+            }
+            for (var k = 0u; k < SG; k++) {
+                let bounds = subgroupShuffle(mine_bounds, k);
+                if any(block_hi < bounds.xy) || any(block_lo > bounds.zw) {
+                    continue;
+                }
+                let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
+                                        subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
+                let alpha = surfel_alpha(s, px);
+                let next_T = T * (1.0 - alpha);
+                let contrib = j + k < m && alpha >= ALPHA_THRESHOLD && !done;
+                let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
+                let use_it = contrib && !saturate;
+                done = done || saturate;
+                let w = select(0.0, alpha * T, use_it);
+                acc_color += w * subgroupShuffle(mine_col, k);
+                acc_nd += w * s.normal_depth;
+                T = select(T, next_T, use_it);
+                last = select(last, base + j + k + 1u - range.x, use_it);
+            }
+        }
+        result.color[0] += acc_color;
+        result.normal += acc_nd.xyz;
+        result.depth += acc_nd.w;
+        result.last = max(result.last, last);
+#else
+        if !done {
+            for (var j = 0u; j < m; j++) {
+                if !blend(batch_surf[j], px, j, base + j + 1u - range.x, &result, &T) {
+                    done = true;
+                    break;
+                }
+            }
+        }
+#endif
+        if done && !was_done {
+            atomicAdd(&done_count, 1u);
+        }
+    }
+    result.transmittance = T;
+    return result;
+}

@@ -1,0 +1,39 @@
+// Forward rasterizer writing colour, alpha, normal and depth images to storage buffers, plus the
+// per-pixel final transmittance and contributor count that the backward pass replays from.
+#include "render/rasterize_core.wgsl"
+
+@group(0) @binding(6) var<storage, read_write> out_color: array<f32>;    // [H, W, CHANNELS]
+@group(0) @binding(7) var<storage, read_write> out_alpha: array<f32>;    // [H, W]
+@group(0) @binding(8) var<storage, read_write> out_normal: array<f32>;   // [H, W, 3]
+@group(0) @binding(9) var<storage, read_write> out_depth: array<f32>;    // [H, W]
+@group(0) @binding(10) var<storage, read_write> out_final_t: array<f32>; // [H, W]
+@group(0) @binding(11) var<storage, read_write> out_last: array<u32>;    // [H, W]
+
+// One-dimensional workgroup: subgroup builtins are only defined for those.
+@compute @workgroup_size(256)
+#if USE_SUBGROUPS
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+        @builtin(subgroup_invocation_id) sg_lane: u32) {
+#else
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let sg_lane = 0u;
+#endif
+    let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let r = composite_pixel(tile, vec2<f32>(pix) + 0.5, inside, lid, sg_lane);
+    if !inside {
+        return;
+    }
+    let p = pix.y * params.image_size.x + pix.x;
+    for (var c = 0u; c < CHANNELS; c++) {
+        out_color[p * CHANNELS + c] = r.color[c / 4u][c % 4u] + r.transmittance * background[c];
+    }
+    out_alpha[p] = 1.0 - r.transmittance;
+    out_normal[3u * p] = r.normal.x;
+    out_normal[3u * p + 1u] = r.normal.y;
+    out_normal[3u * p + 2u] = r.normal.z;
+    out_depth[p] = r.depth;
+    out_final_t[p] = r.transmittance;
+    out_last[p] = r.last;
+}

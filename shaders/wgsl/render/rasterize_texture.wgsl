@@ -1,0 +1,26 @@
+// Forward rasterizer writing straight into an rgba8 storage texture (the viewer's path: no readback).
+// Colour channels 0..2 are composited over the background; the texture's alpha is the coverage.
+#include "render/rasterize_core.wgsl"
+
+@group(0) @binding(6) var out_texture: texture_storage_2d<rgba8unorm, write>;
+
+// One-dimensional workgroup: subgroup builtins are only defined for those.
+@compute @workgroup_size(256)
+#if USE_SUBGROUPS
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+        @builtin(subgroup_invocation_id) sg_lane: u32) {
+#else
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let sg_lane = 0u;
+#endif
+    let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let r = composite_pixel(tile, vec2<f32>(pix) + 0.5, inside, lid, sg_lane);
+    if !inside {
+        return;
+    }
+    let T = r.transmittance;
+    let rgb = r.color[0].xyz + T * vec3<f32>(background[0], background[1], background[2]);
+    textureStore(out_texture, vec2<i32>(pix), vec4<f32>(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0 - T));
+}

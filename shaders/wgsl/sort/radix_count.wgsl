@@ -1,0 +1,39 @@
+// Radix sort, pass 1 of 3: per-block histogram of the digit at SHIFT (a define).
+// hist is digit-major, hist[digit * num_blocks + block], so that one exclusive scan over it yields
+// every block's output offset for every digit.
+#include "common/render_types.wgsl"
+#include "common/sort_types.wgsl"
+
+@group(0) @binding(0) var<storage, read> info: DispatchInfo;   // groups_x = num_blocks, count = keys
+@group(0) @binding(1) var<storage, read> keys: array<u32>;
+@group(0) @binding(2) var<storage, read_write> hist: array<u32>;
+
+var<workgroup> block_hist: array<atomic<u32>, RADIX>;
+
+@compute @workgroup_size(SORT_WG)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    if lid < RADIX {
+        atomicStore(&block_hist[lid], 0u);
+    }
+    workgroupBarrier();
+    let count = info.count;
+    let block = wg.x;
+    let start = block * SORT_BLOCK + lid * SORT_ITEMS;
+    var local: array<u32, RADIX>;
+    for (var i = 0u; i < SORT_ITEMS; i++) {
+        let idx = start + i;
+        if idx < count {
+            let digit = (keys[idx] >> SHIFT) & (RADIX - 1u);
+            local[digit] += 1u;
+        }
+    }
+    for (var d = 0u; d < RADIX; d++) {
+        if local[d] != 0u {
+            atomicAdd(&block_hist[d], local[d]);
+        }
+    }
+    workgroupBarrier();
+    if lid < RADIX {
+        hist[lid * info.groups_x + block] = atomicLoad(&block_hist[lid]);
+    }
+}

@@ -1,0 +1,73 @@
+"""The GPU layer: adapter choice, WGSL loader (includes, defines, conditionals, error report)."""
+
+from __future__ import annotations
+
+import pytest
+
+from gma.gpu import ShaderCompileError, ShaderLibrary
+from gma.gpu.adapter import NoAdapterError, select_adapter
+
+
+def write(root, name, text):
+    path = root / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def test_includes_defines_and_conditionals(tmp_path):
+    write(tmp_path, "common/a.wgsl", "const A: u32 = 1u;\n")
+    write(tmp_path, "common/b.wgsl", '#include "common/a.wgsl"\nconst B: u32 = A + 1u;\n')
+    write(tmp_path, "main.wgsl", '#include "common/a.wgsl"\n#include "common/b.wgsl"\n'
+                                 "#if FAST\nconst MODE: u32 = 1u;\n#else\nconst MODE: u32 = 2u;\n#endif\n"
+                                 "#if !FAST\nconst SLOW: bool = true;\n#endif\nenable f16;\n")
+    lib = ShaderLibrary(tmp_path)
+    src = lib.source("main.wgsl", {"FAST": True, "N": 4, "SCALE": 0.5, "NEG": -3})
+    lines = src.splitlines()
+    assert lines[0] == "enable f16;", "directives are hoisted above everything"
+    assert "const FAST: bool = true;" in lines and "const N: u32 = 4u;" in lines
+    assert "const SCALE: f32 = 0.5;" in lines and "const NEG: i32 = -3i;" in lines
+    assert src.count("const A: u32 = 1u;") == 1, "an include is inlined once"
+    assert "const MODE: u32 = 1u;" in src and "MODE: u32 = 2u" not in src and "SLOW" not in src
+    assert "const SLOW: bool = true;" in lib.source("main.wgsl", {"FAST": False})
+
+
+def test_loader_errors(tmp_path):
+    write(tmp_path, "cycle_a.wgsl", '#include "cycle_b.wgsl"\n')
+    write(tmp_path, "cycle_b.wgsl", '#include "cycle_a.wgsl"\n')
+    write(tmp_path, "unclosed.wgsl", "#if X\nconst Y: u32 = 1u;\n")
+    lib = ShaderLibrary(tmp_path)
+    with pytest.raises(ValueError, match="include cycle"):
+        lib.source("cycle_a.wgsl")
+    with pytest.raises(ValueError, match="#if without #endif"):
+        lib.source("unclosed.wgsl")
+    with pytest.raises(FileNotFoundError, match="missing.wgsl"):
+        lib.source("missing.wgsl")
+
+
+@pytest.mark.gpu
+def test_compile_error_prints_numbered_source(gpu, tmp_path):
+    write(tmp_path, "bad.wgsl", "@compute @workgroup_size(1)\nfn main() {\n    let x: u32 = undefined_thing;\n}\n")
+    with pytest.raises(ShaderCompileError) as info:
+        ShaderLibrary(tmp_path).module(gpu.device, "bad.wgsl")
+    text = str(info.value)
+    assert "bad.wgsl" in text and "   4 |     let x: u32 = undefined_thing;" in text
+
+
+@pytest.mark.gpu
+def test_pipeline_cache_reuses_pipelines(gpu):
+    a = gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4})
+    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4}) is a
+    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 8}) is not a
+
+
+def test_adapter_preference_errors(monkeypatch):
+    with pytest.raises(NoAdapterError, match="mesa-vulkan-drivers"):
+        select_adapter("no-such-adapter-name-xyz")
+
+
+@pytest.mark.gpu
+def test_context_reports_features(gpu):
+    assert gpu.name
+    assert isinstance(gpu.has_float_atomics, bool)
+    if gpu.has_subgroups:
+        assert gpu.subgroup_size in (4, 8, 16, 32, 64, 128)
