@@ -1,0 +1,152 @@
+"""Reading standard Gaussian-splat PLY files (the INRIA 3DGS layout, also written by 2DGS tools).
+
+Vertex properties: x, y, z; scale_0.. (log scales); rot_0..rot_3 (w, x, y, z, unnormalised); opacity
+(a logit); f_dc_0..2 (degree-0 spherical-harmonic colour). A 3D-Gaussian file has three scales: the
+smallest is dropped, and the rotation is permuted so that the two kept axes span the surfel plane.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic constant
+
+_PLY_TYPES = {"float": "f4", "float32": "f4", "double": "f8", "float64": "f8", "uchar": "u1", "uint8": "u1",
+              "char": "i1", "int8": "i1", "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+              "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4"}
+
+
+def _read_header(fh, path: Path) -> tuple[str, int, list[tuple[str, str]]]:
+    if fh.readline().strip() != b"ply":
+        raise ValueError(f"{path}: not a PLY file (missing 'ply' magic)")
+    fmt, count, props, in_vertex = None, None, [], False
+    while True:
+        line = fh.readline()
+        if not line:
+            raise ValueError(f"{path}: PLY header ends without 'end_header'")
+        words = line.decode("ascii", "replace").split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        if words[0] == "format":
+            fmt = words[1]
+        elif words[0] == "element":
+            in_vertex = words[1] == "vertex"
+            if in_vertex:
+                count = int(words[2])
+            elif count is None:
+                raise ValueError(f"{path}: element '{words[1]}' precedes 'vertex'; not a splat PLY")
+        elif words[0] == "property" and in_vertex:
+            if words[1] == "list":
+                raise ValueError(f"{path}: list properties in the vertex element are not supported")
+            if words[1] not in _PLY_TYPES:
+                raise ValueError(f"{path}: unknown PLY property type {words[1]!r}")
+            props.append((words[2], _PLY_TYPES[words[1]]))
+        elif words[0] == "end_header":
+            break
+    if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
+        raise ValueError(f"{path}: unsupported PLY format {fmt!r}")
+    if count is None:
+        raise ValueError(f"{path}: no vertex element")
+    return fmt, count, props
+
+
+def _rotate_to_drop_axis(quats: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """Quaternion whose z axis is the original axis ``drop`` (0, 1 or 2) and whose x, y axes are the
+    other two, keeping a right-handed frame (cyclic permutation of the columns)."""
+    from gma.render.scenes import quat_multiply
+
+    # Rotations that map the local z axis onto x (drop 0) or y (drop 1), as cyclic axis permutations.
+    perm = {0: np.array([0.5, 0.5, 0.5, 0.5]), 1: np.array([0.5, -0.5, -0.5, -0.5])}
+    out = quats.copy()
+    for axis, q in perm.items():
+        sel = drop == axis
+        if sel.any():
+            out[sel] = quat_multiply(quats[sel], np.broadcast_to(q, (int(sel.sum()), 4)))
+    return out
+
+
+def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a splat PLY. Returns float32 arrays ``means`` [N, 3], ``quats`` [N, 4] (w, x, y, z),
+    ``scales`` [N, 2] (activated), ``opacities`` [N] (activated), ``colors`` [N, 3] (RGB in [0, 1])."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"splat file {path} does not exist")
+    with path.open("rb") as fh:
+        fmt, count, props = _read_header(fh, path)
+        names = [p[0] for p in props]
+        if fmt == "ascii":
+            data = np.loadtxt(fh, dtype=np.float64, max_rows=count, ndmin=2)
+            if data.shape != (count, len(props)):
+                raise ValueError(f"{path}: expected {count} vertices of {len(props)} values, got {data.shape}")
+            columns = {n: data[:, i] for i, n in enumerate(names)}
+        else:
+            order = "<" if fmt == "binary_little_endian" else ">"
+            dtype = np.dtype([(n, order + t) for n, t in props])
+            raw = fh.read(dtype.itemsize * count)
+            if len(raw) < dtype.itemsize * count:
+                raise ValueError(f"{path}: file is truncated ({len(raw)} of {dtype.itemsize * count} vertex bytes)")
+            arr = np.frombuffer(raw, dtype=dtype, count=count)
+            columns = {n: arr[n] for n in names}
+    required = ["x", "y", "z", "rot_0", "rot_1", "rot_2", "rot_3", "opacity", "scale_0", "scale_1"]
+    missing = [r for r in required if r not in columns]
+    if missing:
+        raise ValueError(f"{path}: missing splat properties {missing}; expected the INRIA Gaussian layout")
+
+    def col(*keys):
+        return np.stack([np.asarray(columns[k], np.float64) for k in keys], 1)
+
+    means = col("x", "y", "z")
+    quats = col("rot_0", "rot_1", "rot_2", "rot_3")
+    log_scales = col(*(k for k in ("scale_0", "scale_1", "scale_2") if k in columns))
+    norms = np.linalg.norm(quats, axis=1, keepdims=True)
+    quats = np.where(norms > 0, quats / np.maximum(norms, 1e-30), np.array([1.0, 0, 0, 0]))
+    if log_scales.shape[1] == 3:
+        drop = np.argmin(log_scales, axis=1)
+        keep = np.array([[1, 2], [2, 0], [0, 1]])[drop]  # the two other axes in cyclic order
+        log_scales = np.take_along_axis(log_scales, keep, axis=1)
+        quats = _rotate_to_drop_axis(quats, drop)
+    if all(f"f_dc_{i}" in columns for i in range(3)):
+        colors = np.clip(0.5 + SH_C0 * col("f_dc_0", "f_dc_1", "f_dc_2"), 0.0, 1.0)
+    elif all(k in columns for k in ("red", "green", "blue")):
+        colors = col("red", "green", "blue") / 255.0
+    else:
+        colors = np.full((count, 3), 0.7)
+    opacities = 1.0 / (1.0 + np.exp(-np.asarray(columns["opacity"], np.float64)))
+    out = {"means": means, "quats": quats, "scales": np.exp(log_scales), "opacities": opacities, "colors": colors}
+    out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
+    bad = [k for k, v in out.items() if not np.isfinite(v).all()]
+    if bad:
+        raise ValueError(f"{path}: non-finite values in {bad}")
+    return out
+
+
+def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors) -> None:
+    """Write surfels in the INRIA layout (two log scales, opacity logit, f_dc colour), atomically."""
+    import os
+    import tempfile
+
+    path = Path(path)
+    n = len(means)
+    props = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1"]
+             + [f"rot_{i}" for i in range(4)])
+    o = np.clip(np.asarray(opacities, np.float64), 1e-6, 1 - 1e-6)
+    data = np.concatenate([
+        np.asarray(means, np.float64), np.zeros((n, 3)), (np.asarray(colors, np.float64)[:, :3] - 0.5) / SH_C0,
+        np.log(o / (1 - o))[:, None], np.log(np.maximum(np.asarray(scales, np.float64), 1e-12)),
+        np.asarray(quats, np.float64)], 1).astype("<f4")
+    header = "ply\nformat binary_little_endian 1.0\nelement vertex %d\n%send_header\n" % (
+        n, "".join(f"property float {p}\n" for p in props))
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(header.encode("ascii"))
+            fh.write(data.tobytes())
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
