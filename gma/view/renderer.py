@@ -1,0 +1,259 @@
+"""Drawing, separated from any window: the same :class:`FrameRenderer` draws into a window's surface
+texture, into an offscreen texture for ``gma render`` and for tests.
+
+A frame is three submissions and no readback:
+1. the source's posing (``GpuPoser`` skinning + surfel placement into the renderer's input buffers);
+2. the surfel renderer into an rgba8unorm storage image (``SurfelRasterizer.render_to_texture``);
+3. one render pass into the target: blit of that image, then the mesh overlays (depth pre-pass,
+   coarse surfels, wireframe, normals, selection highlight) and screen-space lines (box / lasso).
+``SurfelRasterizer.grow_capacity`` (a 4-byte read) runs only every ``capacity_every`` frames.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import wgpu
+
+from gma.gpu import GpuContext
+from gma.render.camera import Camera
+from gma.render.rasterizer import SurfelRasterizer
+from gma.view.pipelines import DEPTH_FORMAT, ViewerPipelines, clip_matrix
+from gma.view.source import SurfelSource
+
+__all__ = ["DrawOptions", "FrameRenderer", "Scene"]
+
+UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
+OFFSCREEN_FORMAT = wgpu.TextureFormat.rgba8unorm
+
+
+@dataclass
+class DrawOptions:
+    """What a frame shows. Colours are RGB(A) in [0, 1]."""
+
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    surfels: bool = True            # the surfel image (off: background only, e.g. to inspect the mesh)
+    wireframe: bool = False         # posed mesh edges, hidden lines removed
+    normals: bool = False           # one line per face along its normal
+    coarse: bool = False            # one disc per face, coloured by normal (the coarse surfel layer)
+    selection: bool = True          # highlight of the selected faces
+    wire_color: tuple = (0.1, 0.1, 0.1, 0.6)
+    normal_color: tuple = (0.1, 0.3, 1.0, 1.0)
+    highlight_color: tuple = (1.0, 0.45, 0.0, 0.55)
+    normal_length: float = 0.02     # metres
+    coarse_radius: float = 0.7      # disc radius as a fraction of sqrt(face area)
+
+
+@dataclass
+class Scene:
+    """A source plus what is drawn over it. ``selection`` holds selected face ids [K] (int); assign a new
+    array through :meth:`set_selection` so the renderer knows to re-upload it."""
+
+    source: SurfelSource
+    options: DrawOptions = field(default_factory=DrawOptions)
+    selection: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    selection_version: int = 0
+
+    def set_selection(self, face_ids) -> None:
+        self.selection = np.asarray(face_ids, np.int64).reshape(-1)
+        self.selection_version += 1
+
+
+def _edges(faces: np.ndarray) -> np.ndarray:
+    """Unique undirected edges [E, 2] of a triangle mesh [F, 3]."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e.sort(axis=1)
+    return np.unique(e, axis=0)
+
+
+class FrameRenderer:
+    """Owns the intermediate image, depth buffer, pipelines and per-mesh overlay buffers of one device."""
+
+    def __init__(self, ctx: GpuContext, capacity_every: int = 30):
+        self.ctx = ctx
+        self.rasterizer = SurfelRasterizer(ctx)
+        self.pipelines = ViewerPipelines(ctx)
+        self.capacity_every = capacity_every
+        self.frames = 0
+        self._image = self._depth = None
+        self._image_size = self._depth_size = (0, 0)
+        self._background = ctx.buffer(16, "viewer.background")
+        self._background_value: tuple | None = None
+        self._overlay_params = {k: ctx.buffer(96, f"viewer.overlay.{k}", UNIFORM)
+                                for k in ("depth", "wire", "highlight", "normals", "coarse")}
+        self._lines_params = ctx.buffer(32, "viewer.lines", UNIFORM)
+        self._mesh_key = None
+        self._edges_buf = None
+        self._num_edges = 0
+        self._sel_buf = None
+        self._sel_key = None
+        self._num_sel = 0
+        self._offscreen = None
+        self.last_state = None
+
+    # -- resources ------------------------------------------------------------------------------------
+    def _ensure_image(self, w: int, h: int) -> None:
+        if self._image_size != (w, h):
+            self._image = self.ctx.device.create_texture(
+                size=(w, h, 1), format=wgpu.TextureFormat.rgba8unorm,
+                usage=wgpu.TextureUsage.STORAGE_BINDING | wgpu.TextureUsage.TEXTURE_BINDING, label="viewer.image")
+            self._image_view = self._image.create_view()
+            self._blit_bind = self.ctx.device.create_bind_group(
+                layout=self.pipelines.blit_layout, entries=[{"binding": 0, "resource": self._image_view}])
+            self._image_size = (w, h)
+
+    def _ensure_depth(self, w: int, h: int) -> None:
+        if self._depth_size != (w, h):
+            self._depth = self.ctx.device.create_texture(size=(w, h, 1), format=DEPTH_FORMAT,
+                                                         usage=wgpu.TextureUsage.RENDER_ATTACHMENT)
+            self._depth_view = self._depth.create_view()
+            self._depth_size = (w, h)
+
+    def _ensure_mesh(self, scene: Scene) -> None:
+        mesh = scene.source.mesh
+        key = (id(mesh.positions), id(mesh.faces))
+        if key != self._mesh_key:
+            faces = scene.source.body.faces.numpy()
+            edges = _edges(faces)
+            self._edges_buf = self.ctx.upload(edges.astype(np.uint32), "viewer.edges")
+            self._num_edges = len(edges)
+            self._mesh_key, self._sel_key = key, None
+            self._mesh_binds = {}
+        if (key, scene.selection_version) != self._sel_key:
+            ids = scene.selection.astype(np.uint32)
+            self._num_sel = len(ids)
+            self._sel_buf = self.ctx.upload(ids if len(ids) else np.zeros(1, np.uint32), "viewer.selection")
+            self._sel_key = (key, scene.selection_version)
+            self._mesh_binds.pop("highlight", None)
+
+    def _mesh_bind(self, kind: str, mesh, items):
+        bind = self._mesh_binds.get(kind)
+        if bind is None:
+            entries = [{"binding": 0, "resource": {"buffer": self._overlay_params[kind], "offset": 0, "size": 96}}]
+            for i, buf in ((1, mesh.positions), (2, mesh.faces), (3, items)):
+                entries.append({"binding": i, "resource": {"buffer": buf, "offset": 0, "size": buf.size}})
+            bind = self._mesh_binds[kind] = self.ctx.device.create_bind_group(
+                layout=self.pipelines.overlay_layout, entries=entries)
+        return bind
+
+    def _set_background(self, rgb) -> None:
+        value = tuple(float(c) for c in rgb[:3])
+        if value != self._background_value:
+            self.ctx.write(self._background, np.array(value + (1.0,), np.float32))
+            self._background_value = value
+
+    # -- drawing ---------------------------------------------------------------------------------------
+    def draw(self, scene: Scene, camera: Camera, target: wgpu.GPUTextureView, target_format: str,
+             lines: list[np.ndarray] | None = None, timer=None) -> None:
+        """Draw ``scene`` seen by ``camera`` into ``target`` (a texture view of ``camera``'s size and
+        ``target_format``). ``lines``: screen-space polylines [P, 2] in pixels; ``timer``: a
+        :class:`gma.view.timing.FrameTimer` on sampled frames."""
+        ctx, opts, src = self.ctx, scene.options, scene.source
+        w, h = camera.width, camera.height
+        enc = ctx.device.create_command_encoder(label="viewer.pose")
+        if timer:
+            timer.mark(enc, "pose.begin")
+        src.encode_update(enc)
+        if timer:
+            timer.mark(enc, "pose.end")
+        ctx.submit(enc)
+        self._set_background(opts.background)
+        if opts.surfels:
+            self._ensure_image(w, h)
+            self.last_state = self.rasterizer.render_to_texture(src.surfels, camera, self._image_view,
+                                                                self._background, timer)
+            if self.frames % self.capacity_every == 0:
+                self.rasterizer.grow_capacity(self.last_state)
+        self.frames += 1
+        self._ensure_depth(w, h)
+        enc = ctx.device.create_command_encoder(label="viewer.overlay")
+        rp = enc.begin_render_pass(
+            color_attachments=[{"view": target, "clear_value": (*opts.background[:3], 1.0),
+                                "load_op": wgpu.LoadOp.clear, "store_op": wgpu.StoreOp.store}],
+            depth_stencil_attachment={"view": self._depth_view, "depth_clear_value": 1.0,
+                                      "depth_load_op": wgpu.LoadOp.clear, "depth_store_op": wgpu.StoreOp.discard},
+            timestamp_writes=timer.writes("overlay") if timer else None,
+        )
+        if opts.surfels:
+            rp.set_pipeline(self.pipelines.get("blit", target_format))
+            rp.set_bind_group(0, self._blit_bind)
+            rp.draw(3)
+        mesh = src.mesh
+        want_sel = opts.selection and len(scene.selection) > 0
+        if mesh is not None and (opts.wireframe or opts.normals or opts.coarse or want_sel):
+            self._draw_mesh_overlays(rp, scene, camera, target_format, mesh)
+        if lines:
+            self._draw_lines(rp, lines, w, h, target_format)
+        rp.end()
+        if timer:
+            timer.resolve(enc)
+        ctx.submit(enc)
+
+    def _draw_mesh_overlays(self, rp, scene: Scene, camera: Camera, fmt: str, mesh) -> None:
+        opts = scene.options
+        self._ensure_mesh(scene)
+        lo, hi = scene.source.bounds()
+        eye = -camera.viewmat[:3, :3].T @ camera.viewmat[:3, 3]
+        # Near/far from the distance to the body's box, for depth precision (with generous margins).
+        reach = float(np.linalg.norm(np.maximum(np.abs(lo - eye), np.abs(hi - eye)))) + 1.0
+        mvp = clip_matrix(camera, 0.01, 2.0 * reach)
+
+        def draw(kind, color, count, items):
+            settings = (opts.normal_length, opts.coarse_radius, 2e-4, 0.0)
+            data = np.concatenate([mvp.T.reshape(-1), np.asarray(color, np.float32), settings]).astype(np.float32)
+            self.ctx.write(self._overlay_params[kind], data)
+            rp.set_pipeline(self.pipelines.get(kind, fmt))
+            rp.set_bind_group(0, self._mesh_bind(kind, mesh, items))
+            rp.draw(count)
+
+        nf = mesh.num_faces
+        if opts.coarse:
+            draw("coarse", (1, 1, 1, 1), 6 * nf, self._edges_buf)
+        draw("depth", (0, 0, 0, 0), 3 * nf, self._edges_buf)
+        if opts.selection and self._num_sel:
+            draw("highlight", opts.highlight_color, 3 * self._num_sel, self._sel_buf)
+        if opts.wireframe:
+            draw("wire", opts.wire_color, 2 * self._num_edges, self._edges_buf)
+        if opts.normals:
+            draw("normals", opts.normal_color, 2 * nf, self._edges_buf)
+
+    def _draw_lines(self, rp, lines, w, h, fmt) -> None:
+        self.ctx.write(self._lines_params, np.array([w, h, 0, 0, 1.0, 0.85, 0.0, 1.0], np.float32))
+        bind = self.ctx.device.create_bind_group(layout=self.pipelines.lines_layout, entries=[
+            {"binding": 0, "resource": {"buffer": self._lines_params, "offset": 0, "size": 32}}])
+        rp.set_pipeline(self.pipelines.get("lines", fmt))
+        rp.set_bind_group(0, bind)
+        for line in lines:
+            pts = np.asarray(line, np.float32).reshape(-1, 2)
+            if len(pts) < 2:
+                continue
+            vb = self.ctx.upload(pts, "viewer.lines.vertices", wgpu.BufferUsage.VERTEX | wgpu.BufferUsage.COPY_DST)
+            rp.set_vertex_buffer(0, vb)
+            rp.draw(len(pts))
+
+    # -- offscreen -------------------------------------------------------------------------------------
+    def render_image(self, scene: Scene, camera: Camera, complete: bool = True) -> np.ndarray:
+        """Draw offscreen and read the result back: [H, W, 4] uint8 RGBA. With ``complete`` the frame is
+        redrawn once if the intersection capacity had to grow (so no surfel is dropped)."""
+        w, h = camera.width, camera.height
+        if self._offscreen is None or self._offscreen.size[:2] != (w, h):
+            self._offscreen = self.ctx.device.create_texture(
+                size=(w, h, 1), format=OFFSCREEN_FORMAT,
+                usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC, label="viewer.offscreen")
+        view = self._offscreen.create_view()
+        self.draw(scene, camera, view, OFFSCREEN_FORMAT)
+        if complete and scene.options.surfels and self.rasterizer.grow_capacity(self.last_state):
+            self.draw(scene, camera, view, OFFSCREEN_FORMAT)
+        return read_texture(self.ctx, self._offscreen)
+
+
+def read_texture(ctx: GpuContext, texture) -> np.ndarray:
+    """[H, W, 4] uint8 copy of a 4-byte-per-pixel texture (BGRA formats are swapped to RGBA)."""
+    w, h = texture.size[0], texture.size[1]
+    raw = ctx.device.queue.read_texture({"texture": texture, "origin": (0, 0, 0), "mip_level": 0},
+                                        {"offset": 0, "bytes_per_row": 4 * w, "rows_per_image": h}, (w, h, 1))
+    img = np.frombuffer(raw, np.uint8).reshape(h, w, 4).copy()
+    if str(texture.format).startswith("bgra"):
+        img = img[..., [2, 1, 0, 3]]
+    return img
