@@ -1,0 +1,80 @@
+"""``gma-viewer`` / ``gma view``: open a surfel source in the real-time window."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+__all__ = ["add_arguments", "main", "run"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("source", nargs="?", default="body:anny",
+                   help="a fitted avatar .gma, a splat .ply, or body:anny / body:smplx (placeholder surfels)")
+    p.add_argument("--surfels", type=int, default=50_000, help="placeholder surfels for body:* sources")
+    p.add_argument("--size", default="800x600", help="window size WxH")
+    p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
+    p.add_argument("--sequence", default=None, help="sequence folder: its cameras become presets, its poses a motion")
+    p.add_argument("--no-panels", action="store_true", help="no Dear ImGui panels (mouse and keys only)")
+    p.add_argument("--frames", type=int, default=0, help="draw this many frames and exit (0: until closed)")
+    p.add_argument("--screenshot", default=None, help="with --frames: save the last frame as PNG")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"size must look like 800x600, got {text!r}") from None
+    if w < 1 or h < 1:
+        raise ValueError(f"size must be positive, got {text!r}")
+    return w, h
+
+
+def run(args: argparse.Namespace) -> int:
+    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
+    from gma.gpu import get_context
+    from gma.view import load_source
+    from gma.view.presets import sequence_cameras
+    from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
+
+    width, height = parse_size(args.size)
+    ctx = get_context()
+    source = load_source(ctx, args.source, args.surfels)
+    presets = sequence_cameras(args.sequence) if args.sequence else []
+    state = ViewerState(ctx, source, presets)
+    motion = args.motion or (args.sequence if args.sequence and state.controls is not None else None)
+    if motion:
+        state.play_motion(motion)
+    window = ViewerWindow(state, width, height, panels=not args.no_panels)
+    if args.frames <= 0:
+        window.run()
+        return 0
+    try:
+        for _ in range(args.frames - 1):
+            window.draw_frame()
+        image = window.screenshot()
+        if args.screenshot:
+            import imageio.v3 as iio
+
+            iio.imwrite(args.screenshot, image[..., :3])
+        print(window.stats.summary())
+    finally:
+        window.close()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="gma-viewer", description="GMA real-time viewer")
+    add_arguments(parser)
+    args = parser.parse_args(argv)
+    try:
+        return run(args)
+    except (FileNotFoundError, ValueError) as exc:
+        print(f"gma-viewer: error: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
