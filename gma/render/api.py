@@ -39,9 +39,49 @@ def _host(t: torch.Tensor) -> np.ndarray:
     return t.detach().to("cpu", torch.float32).contiguous().numpy()
 
 
+class _RasterizeFunction(torch.autograd.Function):
+    """Bridges torch autograd and the WGSL passes. Forward keeps exactly what backward needs (the
+    typed :class:`ForwardState` and the uploaded surfels) on the GPU; backward uploads the upstream
+    image gradients, runs the two backward passes and reads back the surfel gradients."""
+
+    @staticmethod
+    def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu):
+        fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
+        surfels = SurfelBuffers.from_arrays(gpu, _host(means), _host(quats), _host(scales), _host(opacities),
+                                            _host(colors))
+        camera = Camera(_host(viewmat), _host(K), width, height)
+        bg = None if background is None else _host(background)
+        rast = rasterizer_for(gpu)
+        state = rast.forward(surfels, camera, bg)
+        out = read_outputs(gpu, state)
+        fctx.state, fctx.surfels, fctx.rast = state, surfels, rast
+        fctx.device = means.device
+        fctx.has_background = background is not None
+        tensors = [torch.from_numpy(a).to(means.device) for a in (out.color, out.alpha, out.normal, out.depth)]
+        fctx.save_for_backward(tensors[1])
+        return tuple(tensors)
+
+    @staticmethod
+    def backward(fctx, v_color, v_alpha, v_normal, v_depth):
+        needs = fctx.needs_input_grad
+        if not any(needs[:5]) and not needs[7]:
+            return (None,) * 11
+        (alpha,) = fctx.saved_tensors
+        grads = fctx.rast.backward(fctx.state, fctx.surfels, *(None if g is None else _host(g)
+                                                                for g in (v_color, v_alpha, v_normal, v_depth)))
+        dev = fctx.device
+        result = [torch.from_numpy(g).to(dev) if need else None
+                  for g, need in zip((grads.means, grads.quats, grads.scales, grads.opacities, grads.colors), needs)]
+        v_background = None
+        if needs[7] and fctx.has_background and v_color is not None:
+            # colour = sum w c + (1 - alpha) background: d/d background = sum over pixels of v_color (1 - alpha).
+            v_background = (v_color * (1 - alpha)).sum(dim=(0, 1))
+        return (*result, None, None, v_background, None, None, None)
+
+
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int,
               background=None, ctx: GpuContext | None = None) -> RenderOutput:
-    """Render 2D Gaussian surfels (DESIGN.md "Renderer contract") with the WGSL renderer.
+    """Render 2D Gaussian surfels (DESIGN.md "Renderer contract") with the WGSL renderer; differentiable.
 
     Args:
         means: [N, 3] world positions. quats: [N, 4] rotations (w, x, y, z), normalised internally.
@@ -50,17 +90,14 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         K: [3, 3] intrinsics in pixels. width, height: image size. background: [C] or None (zeros).
         ctx: GPU context (default: the shared one).
     Returns:
-        :class:`RenderOutput` with float32 tensors on the device of ``means``.
+        :class:`RenderOutput` with float32 tensors on the device of ``means``. When any of means, quats,
+        scales, opacities, colors or background requires grad, the outputs carry a ``grad_fn`` whose
+        backward runs the WGSL backward passes (camera gradients are not computed).
     """
     means, quats, scales, opacities, colors = check_surfels(means, quats, scales, opacities, colors)
     viewmat, K, width, height = check_camera(viewmat, K, width, height)
     background = check_background(background, colors.shape[1])
-    ctx = ctx or get_context()
-    surfels = SurfelBuffers.from_arrays(ctx, _host(means), _host(quats), _host(scales), _host(opacities),
-                                        _host(colors))
-    camera = Camera(_host(viewmat), _host(K), width, height)
-    bg = None if background is None else _host(background)
-    state = rasterizer_for(ctx).forward(surfels, camera, bg)
-    out = read_outputs(ctx, state)
-    dev = means.device
-    return RenderOutput(*(torch.from_numpy(a).to(dev) for a in (out.color, out.alpha, out.normal, out.depth)))
+    gpu = ctx or get_context()
+    outs = _RasterizeFunction.apply(means, quats, scales, opacities, colors, viewmat, K, background, width, height,
+                                    gpu)
+    return RenderOutput(*outs)

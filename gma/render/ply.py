@@ -136,8 +136,8 @@ def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors) ->
         np.asarray(means, np.float64), np.zeros((n, 3)), (np.asarray(colors, np.float64)[:, :3] - 0.5) / SH_C0,
         np.log(o / (1 - o))[:, None], np.log(np.maximum(np.asarray(scales, np.float64), 1e-12)),
         np.asarray(quats, np.float64)], 1).astype("<f4")
-    header = "ply\nformat binary_little_endian 1.0\nelement vertex %d\n%send_header\n" % (
-        n, "".join(f"property float {p}\n" for p in props))
+    prop_lines = "".join(f"property float {p}\n" for p in props)
+    header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n{prop_lines}end_header\n"
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
     try:
         with os.fdopen(fd, "wb") as fh:

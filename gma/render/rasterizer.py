@@ -76,6 +76,7 @@ class SurfelRasterizer:
         self.sorter = RadixSorter(ctx)
         self.scan = ExclusiveScan(ctx)
         self.isect_capacity_hint = 1 << 16
+        self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
         # on GPUs those reads are broadcasts and the plain loop is simpler.
         self.use_subgroups = ctx.has_subgroups and ctx.is_software and 1 <= ctx.subgroup_size <= BATCH_MIN
@@ -172,7 +173,7 @@ class SurfelRasterizer:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", defines)
             resources = dict(enumerate(inputs + list(target)))
         if defines["USE_SUBGROUPS"]:
-            resources[12] = st.pixel_bounds if n else empty
+            resources[14] = st.pixel_bounds if n else empty
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges
 
@@ -204,6 +205,59 @@ class SurfelRasterizer:
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *outputs)
 
+    def backward(self, state: ForwardState, surfels: SurfelBuffers, v_color: np.ndarray | None,
+                 v_alpha: np.ndarray | None, v_normal: np.ndarray | None, v_depth: np.ndarray | None,
+                 timer: PassTimer | None = None) -> SurfelGrads:
+        """Gradients of a scalar loss with respect to the surfels of a forward render, given its
+        gradients with respect to the output images (None: zero). ``surfels`` must hold the same values
+        as in the forward call. One submission plus the read-back of the gradients."""
+        ctx, n, c = self.ctx, state.num_surfels, state.channels
+        cam = state.camera
+        hw = cam.width * cam.height
+        if n == 0:
+            return SurfelGrads(*(np.zeros(shape, np.float32) for shape in ((0, 3), (0, 4), (0, 2), (0,), (0, c))))
+        upstream = []
+        for name, arr, per_pixel in (("v_color", v_color, c), ("v_alpha", v_alpha, 1), ("v_normal", v_normal, 3),
+                                     ("v_depth", v_depth, 1)):
+            if arr is None:
+                upstream.append(ctx.buffer(4 * hw * per_pixel, name))  # wgpu zero-fills new buffers
+            else:
+                upstream.append(ctx.upload(np.asarray(arr, np.float32).reshape(-1), name))
+        v_proj = ctx.buffer(4 * 16 * n, "v_proj")
+        v_colors = ctx.buffer(4 * c * n, "v_colors")
+        tx, ty = tile_grid(cam.width, cam.height)
+        defines = self.backward_defines(c)
+        enc = ctx.device.create_command_encoder()
+        raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
+        resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
+                                    state.tile_ranges, state.background, state.final_t, state.last, *upstream,
+                                    v_proj, v_colors]))
+        if defines["USE_SUBGROUPS"]:
+            resources[14] = state.proj.pixel_bounds
+        self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
+        outs = [ctx.buffer(4 * k * n, name) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
+                                                           ("v_opacities", 1))]
+        proj = ctx.compute_pipeline("render/project_bwd.wgsl")
+        self._dispatch(enc, proj, [state.proj.params, surfels.means, surfels.quats, surfels.scales,
+                                   state.proj.tile_counts, v_proj, *outs], ((n + 255) // 256, 1, 1),
+                       "project_bwd", timer)
+        if timer:
+            timer.resolve(enc)
+        ctx.submit(enc)
+        f32 = np.float32
+        return SurfelGrads(
+            means=ctx.read(outs[0], f32, 3 * n).reshape(n, 3),
+            quats=ctx.read(outs[1], f32, 4 * n).reshape(n, 4),
+            scales=ctx.read(outs[2], f32, 2 * n).reshape(n, 2),
+            opacities=ctx.read(outs[3], f32, n),
+            colors=ctx.read(v_colors, f32, c * n).reshape(n, c),
+        )
+
+    def backward_defines(self, channels: int) -> dict:
+        defines = self.raster_defines(channels)
+        defines["FLOAT_ATOMICS"] = self.ctx.has_float_atomics and self.use_float_atomics
+        return defines
+
     def render_to_texture(self, surfels: SurfelBuffers, camera: Camera, view: wgpu.GPUTextureView,
                           background: wgpu.GPUBuffer, timer: PassTimer | None = None) -> ProjectionState:
         """Render into an rgba8unorm storage texture in one submission, with no readback. Intersections
@@ -228,6 +282,18 @@ class SurfelRasterizer:
 
 
 CAPACITY_OFFSET = 116  # byte offset of RenderParams.isect_capacity
+
+
+@dataclass
+class SurfelGrads:
+    """Gradients with respect to the renderer inputs (float32 numpy): ``means`` [N, 3], ``quats`` [N, 4],
+    ``scales`` [N, 2], ``opacities`` [N], ``colors`` [N, C]."""
+
+    means: np.ndarray
+    quats: np.ndarray
+    scales: np.ndarray
+    opacities: np.ndarray
+    colors: np.ndarray
 
 
 @dataclass

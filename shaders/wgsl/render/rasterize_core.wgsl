@@ -12,7 +12,7 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(12) var<storage, read> pixel_bounds: array<vec4<f32>>;     // [N] lo.xy, hi.xy
+@group(0) @binding(14) var<storage, read> pixel_bounds: array<vec4<f32>>;     // [N] lo.xy, hi.xy
 var<workgroup> batch_bounds: array<vec4<f32>, BATCH>;
 #endif
 

@@ -1,0 +1,120 @@
+// Projection backward: one thread per surfel. Chains the rasterizer's gradients with respect to the ray
+// transform T, the projected centre, the camera-space normal and the depth down to means, quaternions
+// and scales, by recomputing the forward projection (cheaper than storing its intermediates).
+#include "common/render_types.wgsl"
+#include "common/math.wgsl"
+
+@group(0) @binding(0) var<uniform> params: RenderParams;
+@group(0) @binding(1) var<storage, read> means: array<f32>;        // [N, 3]
+@group(0) @binding(2) var<storage, read> quats: array<f32>;        // [N, 4]
+@group(0) @binding(3) var<storage, read> scales: array<f32>;       // [N, 2]
+@group(0) @binding(4) var<storage, read> tile_counts: array<u32>;  // [N], 0 when culled
+@group(0) @binding(5) var<storage, read> v_proj: array<f32>;       // [N, 16] (layout: grad_atomics.wgsl)
+@group(0) @binding(6) var<storage, read_write> v_means: array<f32>;     // [N, 3]
+@group(0) @binding(7) var<storage, read_write> v_quats: array<f32>;     // [N, 4]
+@group(0) @binding(8) var<storage, read_write> v_scales: array<f32>;    // [N, 2]
+@group(0) @binding(9) var<storage, read_write> v_opacities: array<f32>; // [N]
+
+// Gradient of R(q / |q|) with respect to q, given dL/dR (columns of v_r are dL/d(column)).
+fn quat_backward(q_in: vec4<f32>, v_r: mat3x3<f32>) -> vec4<f32> {
+    let inv_norm = inverseSqrt(dot(q_in, q_in));
+    let q = q_in * inv_norm;
+    let w = q.x;
+    let x = q.y;
+    let y = q.z;
+    let z = q.w;
+    // g[r][c] = dL/dR[r][c]; WGSL matrices are column-major: v_r[c][r].
+    let g00 = v_r[0][0]; let g01 = v_r[1][0]; let g02 = v_r[2][0];
+    let g10 = v_r[0][1]; let g11 = v_r[1][1]; let g12 = v_r[2][1];
+    let g20 = v_r[0][2]; let g21 = v_r[1][2]; let g22 = v_r[2][2];
+    let v_unit = 2.0 * vec4<f32>(
+        -z * g01 + y * g02 + z * g10 - x * g12 - y * g20 + x * g21,
+        y * g01 + z * g02 + y * g10 - 2.0 * x * g11 - w * g12 + z * g20 + w * g21 - 2.0 * x * g22,
+        -2.0 * y * g00 + x * g01 + w * g02 + x * g10 + z * g12 - w * g20 + z * g21 - 2.0 * y * g22,
+        -2.0 * z * g00 - w * g01 + x * g02 + w * g10 - 2.0 * z * g11 + y * g12 + x * g20 + y * g21,
+    );
+    // Normalisation: d(q/|q|)/dq = (I - q q^T) / |q|.
+    return (v_unit - q * dot(q, v_unit)) * inv_norm;
+}
+
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if i >= params.num_surfels {
+        return;
+    }
+    let g = i * 16u;
+    if tile_counts[i] == 0u {
+        v_means[3u * i] = 0.0;
+        v_means[3u * i + 1u] = 0.0;
+        v_means[3u * i + 2u] = 0.0;
+        for (var k = 0u; k < 4u; k++) {
+            v_quats[4u * i + k] = 0.0;
+        }
+        v_scales[2u * i] = 0.0;
+        v_scales[2u * i + 1u] = 0.0;
+        v_opacities[i] = 0.0;
+        return;
+    }
+    // Recompute the forward projection (project_fwd.wgsl).
+    let mean = vec3<f32>(means[3u * i], means[3u * i + 1u], means[3u * i + 2u]);
+    let r0 = params.w2c_r0;
+    let r1 = params.w2c_r1;
+    let r2 = params.w2c_r2;
+    let mu_c = vec3<f32>(dot(r0.xyz, mean) + r0.w, dot(r1.xyz, mean) + r1.w, dot(r2.xyz, mean) + r2.w);
+    let q = vec4<f32>(quats[4u * i], quats[4u * i + 1u], quats[4u * i + 2u], quats[4u * i + 3u]);
+    let rot = quat_to_mat3(q);
+    let w2c = transpose(mat3x3<f32>(r0.xyz, r1.xyz, r2.xyz));
+    let s = vec2<f32>(scales[2u * i], scales[2u * i + 1u]);
+    let axis_u = w2c * rot[0];
+    let axis_v = w2c * rot[1];
+    let n_raw = w2c * rot[2];
+    let flip = select(1.0, -1.0, dot(n_raw, mu_c) > 0.0);
+    let k = transpose(mat3x3<f32>(params.k_r0.xyz, params.k_r1.xyz, params.k_r2.xyz));
+    let c0 = k * (axis_u * s.x);
+    let c1 = k * (axis_v * s.y);
+    let c2 = k * mu_c;
+    let t0 = vec3<f32>(c0.x, c1.x, c2.x);
+    let t1 = vec3<f32>(c0.y, c1.y, c2.y);
+    let t2 = vec3<f32>(c0.z, c1.z, c2.z);
+    let denom = t2.x * t2.x + t2.y * t2.y - t2.z * t2.z;
+    let f = vec3<f32>(1.0, 1.0, -1.0) / denom;
+    let mu2d = vec2<f32>(dot(f, t0 * t2), dot(f, t1 * t2));
+
+    var v_t0 = vec3<f32>(v_proj[g], v_proj[g + 1u], v_proj[g + 2u]);
+    var v_t1 = vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]);
+    var v_t2 = vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]);
+    let v_mu2d = vec2<f32>(v_proj[g + 9u], v_proj[g + 10u]);
+    let v_normal = vec3<f32>(v_proj[g + 12u], v_proj[g + 13u], v_proj[g + 14u]);
+    let v_depth = v_proj[g + 15u];
+
+    // mu2d = (sum_j f_j T0j T2j, sum_j f_j T1j T2j), f = (1, 1, -1) / denom.
+    v_t0 += v_mu2d.x * f * t2;
+    v_t1 += v_mu2d.y * f * t2;
+    v_t2 += v_mu2d.x * f * (t0 - 2.0 * mu2d.x * t2) + v_mu2d.y * f * (t1 - 2.0 * mu2d.y * t2);
+
+    // T = K [c_u, c_v, mu_c] column by column: dL/dcolumn j = K^T (dL/dT)[:, j].
+    let kt = transpose(k);
+    let v_cu = kt * vec3<f32>(v_t0.x, v_t1.x, v_t2.x);
+    let v_cv = kt * vec3<f32>(v_t0.y, v_t1.y, v_t2.y);
+    var v_muc = kt * vec3<f32>(v_t0.z, v_t1.z, v_t2.z);
+    v_muc.z += v_depth;
+    let v_mean = transpose(w2c) * v_muc;
+
+    let v_su = dot(axis_u, v_cu);
+    let v_sv = dot(axis_v, v_cv);
+    let r_t = transpose(w2c);
+    let v_rot = mat3x3<f32>(r_t * v_cu * s.x, r_t * v_cv * s.y, r_t * v_normal * flip);
+    let v_q = quat_backward(q, v_rot);
+
+    v_means[3u * i] = v_mean.x;
+    v_means[3u * i + 1u] = v_mean.y;
+    v_means[3u * i + 2u] = v_mean.z;
+    v_quats[4u * i] = v_q.x;
+    v_quats[4u * i + 1u] = v_q.y;
+    v_quats[4u * i + 2u] = v_q.z;
+    v_quats[4u * i + 3u] = v_q.w;
+    v_scales[2u * i] = v_su;
+    v_scales[2u * i + 1u] = v_sv;
+    v_opacities[i] = v_proj[g + 11u];
+}

@@ -1,0 +1,237 @@
+// Backward rasterizer: one workgroup per tile, one thread per pixel. Each pixel replays its forward
+// compositing back to front, starting from its final transmittance and last contributor, recovering
+// T before each surfel as T_after / (1 - alpha). Per surfel it produces the gradients of the pixel's
+// outputs with respect to the ray transform T, the projected centre, opacity, colour, normal and depth.
+// Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG); the subgroup variant needs CHANNELS <= 4.
+#include "render/rasterize_core.wgsl"
+#include "render/grad_atomics.wgsl"
+
+@group(0) @binding(6) var<storage, read> final_t: array<f32>;          // [H, W]
+@group(0) @binding(7) var<storage, read> last_index: array<u32>;       // [H, W]
+@group(0) @binding(8) var<storage, read> v_out_color: array<f32>;      // [H, W, CHANNELS]
+@group(0) @binding(9) var<storage, read> v_out_alpha: array<f32>;      // [H, W]
+@group(0) @binding(10) var<storage, read> v_out_normal: array<f32>;    // [H, W, 3]
+@group(0) @binding(11) var<storage, read> v_out_depth: array<f32>;     // [H, W]
+
+// Gradients of one pixel with respect to one surfel's parameters.
+struct SurfelGrad {
+    v_t0: vec3<f32>,
+    v_t1: vec3<f32>,
+    v_t2: vec3<f32>,
+    v_mu2d: vec2<f32>,
+    v_opacity: f32,
+    v_nd: vec4<f32>,     // normal (xyz), depth (w)
+}
+
+// d alpha / d(T, mu2d, opacity) scaled by v_alpha, for the alpha of DESIGN.md steps 2-3.
+fn alpha_backward(s: ProjectedSurfel, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
+    let h_u = px.x * s.t2.xyz - s.t0.xyz;
+    let h_v = px.y * s.t2.xyz - s.t1.xyz;
+    let p = cross(h_u, h_v);
+    let d = px - vec2<f32>(s.t0.w, s.t1.w);
+    let sigma_2d = dot(d, d);
+    var sigma = sigma_2d;
+    var use_3d = false;
+    var uv = vec2<f32>(0.0);
+    if p.z != 0.0 {
+        uv = p.xy / p.z;
+        let sigma_3d = 0.5 * dot(uv, uv);
+        use_3d = sigma_3d <= sigma_2d;
+        sigma = min(sigma, sigma_3d);
+    }
+    let e = exp(-sigma);
+    let raw = s.t2.w * e;
+    if raw >= MAX_ALPHA {
+        return;  // clamped: alpha no longer depends on the surfel
+    }
+    (*g).v_opacity += v_alpha * e;
+    let v_sigma = -v_alpha * raw;
+    if use_3d {
+        let v_uv = v_sigma * uv;
+        let v_p = vec3<f32>(v_uv / p.z, -dot(v_uv, uv) / p.z);
+        let v_hu = cross(h_v, v_p);
+        let v_hv = cross(v_p, h_u);
+        (*g).v_t0 -= v_hu;
+        (*g).v_t1 -= v_hv;
+        (*g).v_t2 += px.x * v_hu + px.y * v_hv;
+    } else {
+        (*g).v_mu2d += -2.0 * v_sigma * d;
+    }
+}
+
+fn flush(sid: u32, g: SurfelGrad) {
+    let b = sid * G_STRIDE;
+    add_proj(b + G_T0, g.v_t0.x);
+    add_proj(b + G_T0 + 1u, g.v_t0.y);
+    add_proj(b + G_T0 + 2u, g.v_t0.z);
+    add_proj(b + G_T1, g.v_t1.x);
+    add_proj(b + G_T1 + 1u, g.v_t1.y);
+    add_proj(b + G_T1 + 2u, g.v_t1.z);
+    add_proj(b + G_T2, g.v_t2.x);
+    add_proj(b + G_T2 + 1u, g.v_t2.y);
+    add_proj(b + G_T2 + 2u, g.v_t2.z);
+    add_proj(b + G_MU2D, g.v_mu2d.x);
+    add_proj(b + G_MU2D + 1u, g.v_mu2d.y);
+    add_proj(b + G_OPACITY, g.v_opacity);
+    add_proj(b + G_NORMAL, g.v_nd.x);
+    add_proj(b + G_NORMAL + 1u, g.v_nd.y);
+    add_proj(b + G_NORMAL + 2u, g.v_nd.z);
+    add_proj(b + G_DEPTH, g.v_nd.w);
+}
+
+var<workgroup> batch_ids: array<u32, BATCH>;
+
+@compute @workgroup_size(256)
+#if USE_SUBGROUPS
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
+        @builtin(subgroup_invocation_id) sg_lane: u32) {
+#else
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+#endif
+    let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let px = vec2<f32>(pix) + 0.5;
+    let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
+
+    // Per-pixel state of the replay. `acc_*` hold what lies behind the current surfel: sum of w f over
+    // later surfels, the background term for colour included (out = sum w c + T_final bg).
+    var T = select(1.0, final_t[p], inside);
+    let last = select(0u, last_index[p], inside);
+    var v_col: array<vec4<f32>, CHUNKS>;
+    var acc_col: array<vec4<f32>, CHUNKS>;
+    for (var c = 0u; c < CHANNELS; c++) {
+        v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
+        acc_col[c / 4u][c % 4u] = T * background[c];
+    }
+    let v_a = select(0.0, v_out_alpha[p], inside);
+    let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
+                                                   v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
+    var acc_a = 0.0;
+    var acc_nd = vec4<f32>(0.0);
+
+    let range = ranges[tile];
+    let count = range.y - range.x;
+    let num_batches = ceil_div(count, BATCH);
+    // Only the intersections before the tile's furthest last contributor matter.
+    for (var bi = 0u; bi < num_batches; bi++) {
+        let b = num_batches - 1u - bi;
+        let start = b * BATCH;   // local index of the batch's first intersection
+        workgroupBarrier();
+        if lid < BATCH && start + lid < count {
+            let sid = isect_ids[range.x + start + lid];
+            batch_ids[lid] = sid;
+            batch_surf[lid] = projected[sid];
+            for (var c = 0u; c < CHUNKS; c++) {
+                var v = vec4<f32>(0.0);
+                for (var e = 0u; e < 4u; e++) {
+                    if 4u * c + e < CHANNELS {
+                        v[e] = colors[sid * CHANNELS + 4u * c + e];
+                    }
+                }
+                batch_color[lid * CHUNKS + c] = v;
+            }
+#if USE_SUBGROUPS
+            batch_bounds[lid] = pixel_bounds[sid];
+#endif
+        }
+        workgroupBarrier();
+        let m = min(BATCH, count - start);
+#if USE_SUBGROUPS
+        // Uniform over the subgroup: surfels pass between lanes by shuffles (see rasterize_core.wgsl)
+        // and each surfel's gradient is summed over the subgroup before one atomic add per value.
+        let block_lo = subgroupMin(px);
+        let block_hi = subgroupMax(px);
+        let block_last = subgroupMax(last);
+        for (var jj = 0u; jj < m; jj += SG) {
+            let j0 = m - min(m, jj + SG);          // this round covers local slots [j0, m - jj)
+            let slot = min(j0 + sg_lane, m - 1u);
+            let mine = batch_surf[slot];
+            let mine_col = batch_color[slot];
+            let mine_bounds = batch_bounds[slot];
+            let mine_id = batch_ids[slot];
+            let n = m - jj - j0;
+            for (var kk = 0u; kk < n; kk++) {
+                let k = n - 1u - kk;                // back to front within the round
+                let idx = start + j0 + k;            // local intersection index in the tile
+                if idx >= block_last {
+                    continue;
+                }
+                let bounds = subgroupShuffle(mine_bounds, k);
+                if any(block_hi < bounds.xy) || any(block_lo > bounds.zw) {
+                    continue;
+                }
+                let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
+                                        subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
+                let col = subgroupShuffle(mine_col, k);
+                let sid = subgroupShuffle(mine_id, k);
+                let alpha = surfel_alpha(s, px);
+                let contrib = idx < last && alpha >= ALPHA_THRESHOLD;
+                let ra = 1.0 / (1.0 - alpha);
+                let T_i = T * ra;
+                let w = select(0.0, alpha * T_i, contrib);
+                var v_alpha = dot(v_col[0], T_i * col - acc_col[0] * ra)
+                            + v_a * (T_i - acc_a * ra)
+                            + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
+                v_alpha = select(0.0, v_alpha, contrib);
+                // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
+                var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
+                alpha_backward(s, px, v_alpha, &g);
+                g.v_nd = w * v_nd;
+                let g_col = w * v_col[0];
+                acc_col[0] += w * col;
+                acc_a += w;
+                acc_nd += w * s.normal_depth;
+                T = select(T, T_i, contrib);
+                if subgroupAny(contrib) {
+                    let r = SurfelGrad(subgroupAdd(g.v_t0), subgroupAdd(g.v_t1), subgroupAdd(g.v_t2),
+                                       subgroupAdd(g.v_mu2d), subgroupAdd(g.v_opacity), subgroupAdd(g.v_nd));
+                    let rc = subgroupAdd(g_col);
+                    if sg_lane == 0u {  // every lane is active here: the skips above are subgroup-uniform
+                        flush(sid, r);
+                        for (var c = 0u; c < CHANNELS; c++) {
+                            add_color(sid * CHANNELS + c, rc[c]);
+                        }
+                    }
+                }
+            }
+        }
+#else
+        for (var jj = 0u; jj < m; jj++) {
+            let j = m - 1u - jj;
+            let idx = start + j;
+            if idx >= last {
+                continue;
+            }
+            let s = batch_surf[j];
+            let alpha = surfel_alpha(s, px);
+            if alpha < ALPHA_THRESHOLD {
+                continue;
+            }
+            let ra = 1.0 / (1.0 - alpha);
+            let T_i = T * ra;
+            let w = alpha * T_i;
+            var v_alpha = v_a * (T_i - acc_a * ra) + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
+            let sid = batch_ids[j];
+            for (var c = 0u; c < CHUNKS; c++) {
+                let col = batch_color[j * CHUNKS + c];
+                v_alpha += dot(v_col[c], T_i * col - acc_col[c] * ra);
+                acc_col[c] += w * col;
+                for (var e = 0u; e < 4u; e++) {
+                    if 4u * c + e < CHANNELS {
+                        add_color(sid * CHANNELS + 4u * c + e, w * v_col[c][e]);
+                    }
+                }
+            }
+            // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
+            var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
+            alpha_backward(s, px, v_alpha, &g);
+            g.v_nd = w * v_nd;
+            flush(sid, g);
+            acc_a += w;
+            acc_nd += w * s.normal_depth;
+            T = T_i;
+        }
+#endif
+    }
+}
