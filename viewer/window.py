@@ -53,6 +53,7 @@ class ViewerWindow:
                 self.ui = Panels(self, self.format)
         self._drag: dict | None = None
         self._mods = 0
+        self._cursor = (0.0, 0.0)  # last cursor position in window coordinates (from the callback)
         self._last_time = time.perf_counter()
         self._capture: np.ndarray | None = None
         self._want_capture = False
@@ -83,7 +84,7 @@ class ViewerWindow:
         if self.ui is not None:
             self.ui.on_button(button, action)
         self._mods = mods
-        x, y = self._to_pixels(*glfw.get_cursor_pos(window))
+        x, y = self._to_pixels(*self._cursor)
         if action == glfw.PRESS and not self._ui_wants_mouse():
             kind = "pan" if button in (glfw.MOUSE_BUTTON_RIGHT, glfw.MOUSE_BUTTON_MIDDLE) else "orbit"
             if button == glfw.MOUSE_BUTTON_LEFT and mods & glfw.MOD_SHIFT and self.tool == "navigate":
@@ -109,6 +110,7 @@ class ViewerWindow:
     def _on_cursor(self, window, x, y) -> None:
         if self.ui is not None:
             self.ui.on_cursor(x, y)
+        self._cursor = (x, y)
         if self._drag is None:
             return
         px, py = self._to_pixels(x, y)

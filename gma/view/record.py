@@ -111,6 +111,8 @@ class Recorder:
             import imageio.v3 as iio
 
             iio.imwrite(self._tmp, np.stack(self._gif_frames), extension=".gif", duration=1000.0 / self.fps, loop=0)
+        # mkstemp/mkdtemp make private files; a rendered video is an ordinary user file.
+        os.chmod(self._tmp, 0o755 if self.kind == "frames" else 0o644)
         if self.kind == "frames":
             if self.out.exists():
                 shutil.rmtree(self.out)

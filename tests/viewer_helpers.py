@@ -1,0 +1,51 @@
+"""Fixtures shared by the viewer tests: an Xvfb display started by the test session, and small sources."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import time
+
+import pytest
+
+
+@pytest.fixture(scope="session")
+def xvfb_display():
+    """Start Xvfb on a free display for the session (skips when Xvfb is not installed)."""
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb); the window tests need a display")
+    for num in range(151, 200):
+        if os.path.exists(f"/tmp/.X{num}-lock") or os.path.exists(f"/tmp/.X11-unix/X{num}"):
+            continue
+        proc = subprocess.Popen([exe, f":{num}", "-screen", "0", "640x480x24", "-nolisten", "tcp"],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        for _ in range(50):
+            if os.path.exists(f"/tmp/.X11-unix/X{num}") or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        if proc.poll() is None:
+            break
+    else:
+        pytest.skip("could not start Xvfb on any display :151-:199")
+    old = os.environ.get("DISPLAY")
+    os.environ["DISPLAY"] = f":{num}"
+    yield f":{num}"
+    import glfw
+
+    glfw.terminate()
+    proc.terminate()
+    proc.wait(timeout=10)
+    if old is None:
+        os.environ.pop("DISPLAY", None)
+    else:
+        os.environ["DISPLAY"] = old
+
+
+@pytest.fixture(scope="session")
+def small_body_source(gpu, anny_body):
+    """The Anny body with 3000 placeholder surfels (small enough for lavapipe at 160x120)."""
+    from gma.view import BodySource
+
+    return BodySource.placeholder(gpu, anny_body, 3000)
