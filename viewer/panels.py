@@ -157,8 +157,8 @@ class Panels:
             ctl.reset_pose()
             self._motion_index = 0
         imgui.text("shape")
-        for i, label in enumerate(ctl.shape_space.labels):
-            lo, hi = float(ctl.shape_space.low[i]), float(ctl.shape_space.high[i])
+        for i, label in enumerate(ctl.shape_space.labels[:10]):  # SMPL-X: the first betas
+            lo, hi = ctl.shape_range(i)
             changed, v = imgui.slider_float(label, float(ctl.shape[i]), lo, hi)
             if changed:
                 ctl.set_shape(i, v)

@@ -71,8 +71,15 @@ class BodyControls:
         """The canonical pose (A-pose for Anny), playback stopped, shape and expression kept."""
         self.set_motion(None)
 
+    def shape_range(self, index: int) -> tuple[float, float]:
+        """Slider range of shape entry ``index`` (SMPL-X betas have no declared range: ±3 std)."""
+        sp = self.shape_space
+        if sp.low is None or sp.high is None:
+            return -3.0, 3.0
+        return float(sp.low[index]), float(sp.high[index])
+
     def set_shape(self, index: int, value: float) -> None:
-        lo, hi = float(self.shape_space.low[index]), float(self.shape_space.high[index])
+        lo, hi = self.shape_range(index)
         self.shape = self.shape.clone()
         self.shape[index] = min(max(float(value), lo), hi)
         self.apply()
