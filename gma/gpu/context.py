@@ -48,6 +48,7 @@ class GpuContext:
     features: frozenset[str]
     shaders: ShaderLibrary
     transfers: TransferStats = field(default_factory=TransferStats)
+    allocated_bytes: int = 0  # running total of bytes requested through buffer(); benchmarks diff it
     _pipelines: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -147,6 +148,10 @@ class GpuContext:
         size = max(4, (int(nbytes) + 3) // 4 * 4)
         if size > int(self.device.limits["max-buffer-size"]):
             raise MemoryError(f"buffer {label!r} needs {size} bytes, over the device's max-buffer-size")
+        if usage & wgpu.BufferUsage.STORAGE and size > self.max_binding_bytes:
+            raise MemoryError(f"buffer {label!r} needs {size} bytes, over the adapter's storage binding limit of "
+                              f"{self.max_binding_bytes} bytes; render fewer surfels or a smaller image")
+        self.allocated_bytes += size
         return self.device.create_buffer(label=label, size=size, usage=usage)
 
     def upload(self, array: np.ndarray, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:

@@ -1,0 +1,58 @@
+"""Helpers shared by the benchmark scripts: timing medians, machine description, the standard workload."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import platform
+import statistics
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_WORKLOAD = REPO.parent / "shared" / "bench" / "splat_workload.py"
+
+
+def median_ms(fn, repeats: int = 5, warmup: int = 1) -> tuple[float, list[float]]:
+    """Median wall time of ``fn()`` in ms (after ``warmup`` calls), and all samples."""
+    for _ in range(warmup):
+        fn()
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        samples.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(samples), samples
+
+
+def median_dict(dicts: list[dict[str, float]]) -> dict[str, float]:
+    keys = sorted({k for d in dicts for k in d})
+    return {k: statistics.median(d.get(k, 0.0) for d in dicts) for k in keys}
+
+
+def machine() -> str:
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load {load:.2f}"
+
+
+def load_standard_workload():
+    """The shared comparison scene generator (``../shared/bench/splat_workload.py``), or None."""
+    if not SHARED_WORKLOAD.is_file():
+        return None
+    spec = importlib.util.spec_from_file_location("splat_workload", SHARED_WORKLOAD)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def workload_surfels(module, n: int) -> tuple[dict, object]:
+    """Standard scene as 2D surfels (third scale dropped) and its camera."""
+    import numpy as np
+
+    from gma.render.camera import Camera
+
+    w = module.make_workload(n)
+    scene = {"means": w["means"], "quats": w["quats"], "scales": np.ascontiguousarray(w["scales"][:, :2]),
+             "opacities": w["opacities"], "colors": w["colors"]}
+    cam = Camera(w["viewmat"], w["K"], module.WIDTH, module.HEIGHT)
+    return scene, cam
