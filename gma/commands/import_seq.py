@@ -61,6 +61,8 @@ def _import(args: argparse.Namespace) -> int:
             smpl_dir=args.smpl_dir,
             **kw,
         )
+    elif args.body is None or args.camera is None:
+        return _estimate_video(args, kw)
     else:
         seq = importers.import_video(
             args.src,
@@ -80,6 +82,31 @@ def _import(args: argparse.Namespace) -> int:
     print(
         f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body {seq.body.model} ({counts})"
     )
+    return 0
+
+
+def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
+    """No --body/--camera: masks, camera and body from the video itself (gma.video, needs gma[video])."""
+    from gma.video import FitConfig, MissingExtraError, VideoImportConfig, estimate_sequence
+
+    if args.alpha or args.mask_video is not None:
+        raise ValueError("--alpha/--mask-video need --body and --camera; without them give --mask-dir or no "
+                         "mask source (MediaPipe estimates the masks)")
+    if args.camera is not None:
+        raise ValueError("--camera needs --body; without --body give --focal instead (the camera is static)")
+    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
+    cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
+    try:
+        seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body,
+                                        **kw)
+    except MissingExtraError as exc:  # the CLI prints ValueErrors as one line, without a traceback
+        raise ValueError(str(exc)) from exc
+    err = report.get("reprojection_error_px_mean")
+    print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
+          f"{report['frames_detected']}/{report['frames_used']} frames ({report['frames_interpolated']} "
+          f"interpolated), mask IoU of the fitted body {report['mask_iou_mean']:.3f}"
+          + ("" if err is None else f", reprojection error {err:.1f} px"))
+    print(f"report: {seq.root / 'video_report.json'}; overlays: {seq.root / 'video_contact_sheet.png'}")
     return 0
 
 
@@ -120,12 +147,25 @@ def register(subparsers) -> None:
     zj.add_argument("--params", default="params", help="parameter folder (params or new_params)")
     zj.add_argument("--smpl-dir", default=None, help="folder with the SMPL model files (or $GMA_SMPL_DIR)")
 
-    vd = fmt.add_parser("video", help="a video with user-supplied body parameters, camera and masks")
+    vd = fmt.add_parser(
+        "video", help="a video: masks, camera and Anny body estimated (gma[video]) or supplied by the user",
+        description="With no --body/--camera, MediaPipe (pip install 'gma[video]') finds the person's mask and "
+        "landmarks in every frame and Anny is fitted to them. Camera assumptions: static, no zoom, square "
+        "pixels, no distortion, principal point at the image centre, focal length --focal or the image's "
+        "longer side. Resumable work is kept in OUT.work/; the report and a contact sheet of overlays land "
+        "in OUT (video_report.json, video_contact_sheet.png).",
+    )
     _common(vd, "video file (anything ffmpeg reads)")
     _range(vd)
-    vd.add_argument("--body", required=True, help="body.npz in the sequence format (all or selected frames)")
-    vd.add_argument("--camera", required=True, help="cameras.json in the sequence format")
-    masks = vd.add_mutually_exclusive_group(required=True)
+    vd.add_argument("--body", default=None, help="body.npz in the sequence format (all or selected frames); "
+                    "default: fitted to the video")
+    vd.add_argument("--camera", default=None, help="cameras.json in the sequence format (with --body); "
+                    "default: a static camera")
+    vd.add_argument("--focal", type=float, default=None, help="focal length in pixels when estimating "
+                    "(default: the longer image side)")
+    vd.add_argument("--fit-iters", type=int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
+                    help="body fit steps per stage (root only; all bones; bones + phenotype + silhouette)")
+    masks = vd.add_mutually_exclusive_group(required=False)
     masks.add_argument("--alpha", action="store_true", help="masks from the video's alpha channel")
     masks.add_argument("--mask-video", default=None, help="a video of masks, one per frame")
     masks.add_argument("--mask-dir", default=None, help="a folder of mask images, one per frame")

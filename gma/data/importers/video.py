@@ -5,7 +5,8 @@ Frames are read with imageio (ffmpeg). The person's mask comes from one of: the 
 (``mask_video``, grey or RGB, person bright), or a folder of mask images (``mask_dir``, sorted by name,
 one per video frame). Body parameters (``body.npz`` of the sequence format) and cameras
 (``cameras.json``) are given by the user, either for every video frame or for exactly the frames
-selected by ``start``/``end``/``skip``. Estimating masks and body parameters from a raw video comes later.
+selected by ``start``/``end``/``skip``. Without body parameters and cameras, ``gma.video.estimate_sequence``
+estimates masks, camera and body from the video itself (``gma import video clip.mp4 OUT``).
 """
 
 from __future__ import annotations

@@ -1,0 +1,58 @@
+"""Reading a user's video for the preprocessing pipeline: every frame decoded once, with errors that
+name the file and say what is wrong (not a video, no frames, a truncated file)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["VideoError", "read_video"]
+
+
+class VideoError(ValueError):
+    """A video that cannot be used; the message names the file and the problem."""
+
+
+def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, skip: int = 1,
+               max_frames: int | None = None) -> tuple[np.ndarray, list[int]]:
+    """Decode ``path`` and keep frames ``start:end:skip``.
+
+    Returns (frames uint8 [T, H, W, 3], source frame indices [T]). Anything ffmpeg reads works
+    (mp4, mov, webm, gif, ...). ``max_frames`` guards memory: more selected frames is an error that
+    suggests ``--skip``/``--end``.
+    """
+    from gma.data.importers._common import frame_range
+    from gma.data.importers.video import _read_frames
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: video not found")
+    if path.stat().st_size == 0:
+        raise VideoError(f"{path}: the file is empty")
+    frames = []
+    try:
+        for img in _read_frames(path, False):
+            frames.append(img.copy())
+    except ValueError as exc:  # raised by _read_frames when ffmpeg cannot open the file
+        raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
+                         f"(ffmpeg: {_last_line(exc)})") from exc
+    except (OSError, RuntimeError) as exc:
+        # imageio-ffmpeg raises here when the stream ends early (a truncated download, say) —
+        # after the frames it managed to decode.
+        raise VideoError(f"{path}: the video is damaged or truncated after {len(frames)} frames "
+                         f"({_last_line(exc)})") from exc
+    if not frames:
+        raise VideoError(f"{path}: no frames could be decoded (not a video, or a truncated one)")
+    idx = frame_range(len(frames), start, end, skip)
+    if max_frames is not None and len(idx) > max_frames:
+        raise VideoError(f"{path}: {len(idx)} frames selected, more than the limit {max_frames}; "
+                         "use --skip or --end to select fewer")
+    return np.stack([frames[i] for i in idx]), idx
+
+
+def _last_line(exc: BaseException) -> str:
+    """The last non-empty line of an error (ffmpeg's banner before it says nothing useful)."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip() and not ln.startswith("===")]
+    return (lines[-1] if lines else type(exc).__name__).rstrip(")")

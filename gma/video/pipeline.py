@@ -1,0 +1,258 @@
+"""``gma import video clip.mp4 OUT``: from a raw video to a sequence (DESIGN.md "Sequence format") for
+the default Anny body — masks and landmarks (MediaPipe), a static pinhole camera, a body fit, and a
+report with a contact sheet.
+
+Work that takes time is kept in ``OUT.work/`` (next to OUT, not inside it, so the sequence stays
+clean and OUT can be written atomically): per-frame detections ``detect/000000.npz`` and the fit
+``fit_<key>.npz``, keyed by the frames' pixels and the settings, so a second run — after a crash, or
+with ``--force`` to rewrite OUT — reuses them. Delete ``OUT.work/`` to start over.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gma.data.atomic import atomic_write_npz
+from gma.data.body_params import SequenceBody
+from gma.data.sequence import IMAGE_SUFFIXES, Sequence
+from gma.video.fit import FitConfig
+
+__all__ = ["VideoImportConfig", "estimate_sequence", "work_dir"]
+
+REPORT_NAME = "video_report.json"
+SHEET_NAME = "video_contact_sheet.png"
+
+
+@dataclass
+class VideoImportConfig:
+    """Settings of a video import without user-supplied body parameters."""
+
+    focal: float | None = None  # focal length in pixels (default: the image's longer side)
+    start: int = 0  # first video frame
+    end: int | None = None  # stop before this frame
+    skip: int = 1  # keep every N-th frame
+    max_frames: int = 3000  # refuse longer selections (memory: frames are held decoded)
+    sheet_frames: int = 12  # overlays on the contact sheet
+    fit: FitConfig = field(default_factory=FitConfig)
+
+
+def work_dir(out: str | os.PathLike) -> Path:
+    """Where resumable work for ``out`` is kept."""
+    out = Path(out)
+    return out.parent / (out.name + ".work")
+
+
+def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, int]) -> np.ndarray:
+    import imageio.v3 as iio
+
+    from gma.data.importers._common import mask_from_array
+
+    files = sorted(p for p in Path(mask_dir).glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+    if len(files) != n:
+        raise ValueError(f"{mask_dir}: {len(files)} mask images for {n} video frames")
+    out = []
+    for i in idx:
+        m = mask_from_array(iio.imread(files[i]), files[i])
+        if m.shape != shape:
+            raise ValueError(f"{files[i]}: mask is {m.shape[1]}x{m.shape[0]}, video is {shape[1]}x{shape[0]}")
+        out.append(m)
+    return np.stack(out)
+
+
+def _fit_key(det, K: np.ndarray, cfg: FitConfig) -> str:
+    h = hashlib.sha1()
+    for a in (det.pose2d, det.pose3d, det.hands2d, det.found, det.face, K):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(json.dumps(dataclasses.asdict(cfg), sort_keys=True).encode())
+    return h.hexdigest()[:16]
+
+
+def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config: VideoImportConfig | None = None,
+                      mask_dir: str | os.PathLike | None = None, body: str | os.PathLike | None = None,
+                      downscale: int = 1, overwrite: bool = False, progress: bool = True,
+                      anny=None) -> tuple[Sequence, dict]:
+    """Turn video ``src`` into a sequence at ``out``. Returns (sequence, report dict).
+
+    ``mask_dir``: the user's masks (one image per video frame) instead of MediaPipe's. ``body``: the
+    user's ``body.npz`` (Anny, all or the selected frames) instead of the fit. ``anny``: an
+    ``AnnyBody`` to reuse (tests create one per session).
+    """
+    from gma.data.importers._common import write_imported
+    from gma.video.camera import intrinsics, static_camera
+    from gma.video.detect import detect_frames
+    from gma.video.frames import read_video
+
+    cfg = config or VideoImportConfig()
+    src, out = Path(src), Path(out)
+    if out.exists() and not overwrite:
+        raise FileExistsError(f"{out}: already exists (use --force to replace it)")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
+    n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
+    timings["decode"] = time.perf_counter() - t0
+    T, H, W = frames.shape[:3]
+    work = work_dir(out)
+
+    t0 = time.perf_counter()
+    det, reused = detect_frames(frames, work / "detect", progress=progress)
+    timings["detect"] = time.perf_counter() - t0
+    if not det.found.any():
+        raise ValueError(f"{src}: no person detected in any of the {T} frames")
+    if mask_dir is not None:
+        total = n_src if n_src is not None else _count(src)
+        masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
+    else:
+        masks = det.masks
+    K = intrinsics(W, H, cfg.focal)
+
+    if body is not None:
+        (pose, phenotype), fit_info = _user_body(body, idx, src), {}
+    else:
+        pose, phenotype, fit_info = _fit(det, masks, K, cfg, work, anny, progress, timings)
+    centre = np.median(pose[:, 0, :3, 3], axis=0)
+    pose = pose.copy()
+    pose[:, 0, :3, 3] -= centre  # world origin at the person's median root position
+    cams = static_camera(W, H, K, -centre)
+    seq_body = SequenceBody("anny", {"pose": pose.astype(np.float32), "phenotype": phenotype.astype(np.float32)})
+
+    t0 = time.perf_counter()
+    report, sheet = _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_info, cfg, anny)
+    timings["report"] = time.perf_counter() - t0
+    report["seconds"] = {k: round(v, 3) for k, v in timings.items()}
+    report["seconds_per_frame"] = {k: round(v / T, 4) for k, v in timings.items()}
+
+    def extra(writer) -> None:
+        import imageio.v3 as iio
+
+        from gma.data.atomic import atomic_write_json
+
+        atomic_write_json(writer.path(REPORT_NAME), report)
+        iio.imwrite(writer.path(SHEET_NAME), sheet)
+
+    t0 = time.perf_counter()
+    pairs = ((frames[t], masks[t]) for t in range(T))
+    seq = write_imported(out, pairs, T, cams, seq_body, None, downscale, overwrite, "write", extra)
+    report["seconds"]["write"] = round(time.perf_counter() - t0, 3)
+    return seq, report
+
+
+def _count(src: Path) -> int:
+    from gma.data.importers.video import count_frames
+
+    return count_frames(src)
+
+
+def _user_body(body, idx: list[int], src: Path) -> tuple[np.ndarray, np.ndarray]:
+    from gma.data.body_params import load_body
+
+    params = load_body(body)
+    if params.model != "anny":
+        raise ValueError(f"{body}: the video pipeline writes Anny sequences; this file holds {params.model!r} "
+                         "(give --camera and a mask source to import it as is)")
+    n_sel = len(idx)
+    if params.num_frames == n_sel:
+        sel = params
+    elif params.num_frames > idx[-1]:
+        sel = params.subset(idx)
+    else:
+        raise ValueError(f"{body}: {params.num_frames} frames of body parameters for {n_sel} selected frames of {src}")
+    return sel.arrays["pose"], np.asarray(sel.arrays["phenotype"])
+
+
+def _fit(det, masks, K, cfg: VideoImportConfig, work: Path, anny, progress: bool, timings: dict):
+    from gma.video.fit import fit_body
+    from gma.video.rig import AnnyRig
+    from gma.video.swaps import apply_swaps, resolve_swaps
+    from gma.video.targets import build_targets
+
+    t0 = time.perf_counter()
+    swaps = resolve_swaps(det.pose3d, det.found, det.face)
+    p2, p3, h2 = apply_swaps(det.pose2d, det.pose3d, det.hands2d, swaps)
+    key = _fit_key(det, K, cfg.fit) + hashlib.sha1(np.ascontiguousarray(masks).tobytes()).hexdigest()[:8]
+    cache = work / f"fit_{key}.npz"
+    if anny is None:
+        from gma.body import load_body
+
+        anny = load_body("anny")
+    rig = AnnyRig(anny, fit_hands=cfg.fit.fit_hands)
+    tg = build_targets(rig.point_names, p2, p3, h2, det.found, use_hands=cfg.fit.fit_hands)
+    timings["prepare"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if cache.is_file():
+        with np.load(cache, allow_pickle=False) as z:
+            pose, phenotype, uv = z["pose"], z["phenotype"], z["uv"]
+        resumed = True
+    else:
+        res = fit_body(rig, tg, p3, K, masks, cfg.fit, progress=progress)
+        pose, phenotype, uv = res.pose, res.phenotype, res.uv
+        atomic_write_npz(cache, pose=pose, phenotype=phenotype, uv=uv)
+        resumed = False
+    timings["fit"] = time.perf_counter() - t0
+    info = {"uv": uv, "target_uv": tg.uv.numpy(), "conf": tg.conf.numpy(), "swapped": swaps,
+            "resumed_fit": resumed, "points": rig.point_names}
+    return pose, phenotype, info
+
+
+def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_info, cfg,
+            anny) -> tuple[dict, np.ndarray]:
+    import torch
+
+    from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
+
+    if anny is None:
+        from gma.body import load_body
+
+        anny = load_body("anny")
+    T, H, W = frames.shape[:3]
+    K, w2c = cams.frame(0)
+    faces = anny.faces.numpy()
+    with torch.no_grad():
+        verts = anny.pose({"pose": torch.from_numpy(pose).float(),
+                           "shape": torch.from_numpy(np.asarray(phenotype)).float()}).vertices.numpy()
+    ious = []
+    for t in range(T):
+        uv, _ = project_vertices(verts[t], K, w2c)
+        ious.append(mask_iou(silhouette(uv, faces, W, H), masks[t] > 0.5))
+    ious = np.array(ious)
+    sheet_idx = np.unique(np.linspace(0, T - 1, min(cfg.sheet_frames, T)).round().astype(int))
+    tiles = []
+    for t in sheet_idx:
+        uv, depth = project_vertices(verts[t], K, w2c)
+        pts = det.pose2d[t, :, :2] if det.found[t] else None
+        tiles.append(overlay(frames[t], uv, depth, faces, pts))
+    sheet = contact_sheet(tiles, columns=min(4, len(tiles)), tile_width=min(256, W))
+    report = {
+        "video": str(src),
+        "frames_used": T,
+        "source_frames": [int(i) for i in idx],
+        "frames_detected": int(det.found.sum()),
+        "detection_rate": round(det.detection_rate, 4),
+        "frames_interpolated": int((~det.found).sum()),
+        "frames_with_hands": int((det.hands2d[:, :, 0, 2] > 0).any(1).sum()),
+        "frames_detect_reused": int(reused),
+        "mask_iou_mean": round(float(ious.mean()), 4),
+        "mask_iou_per_frame": [round(float(x), 4) for x in ious],
+        "camera": {"focal_px": float(K[0, 0]), "principal_point": [float(K[0, 2]), float(K[1, 2])],
+                   "focal_source": "user" if cfg.focal is not None else "default (longer image side)"},
+        "phenotype": [round(float(x), 4) for x in phenotype],
+        "contact_sheet_frames": [int(t) for t in sheet_idx],
+    }
+    if fit_info:
+        err = reprojection_errors(fit_info["uv"], fit_info["target_uv"], fit_info["conf"])
+        report.update({
+            "reprojection_error_px_mean": round(float(np.nanmean(err)), 3) if np.isfinite(err).any() else None,
+            "reprojection_error_px_per_frame": [None if not np.isfinite(e) else round(float(e), 3) for e in err],
+            "frames_swapped_left_right": int(fit_info["swapped"].sum()),
+            "fit_resumed_from_cache": bool(fit_info["resumed_fit"]),
+            "fit_config": dataclasses.asdict(cfg.fit),
+        })
+    return report, sheet

@@ -1,0 +1,101 @@
+"""Left/right swaps of landmark detectors in back views.
+
+A single image of a person seen from behind projects exactly like the depth-mirrored person seen from
+the front, and MediaPipe — trained mostly on frontal people — often picks the frontal reading: it then
+labels the person's left side "right" and mirrors the depth of its 3D landmarks. Per frame there are
+two readings: as detected (h0), or with left/right labels exchanged and the 3D depth mirrored (h1).
+
+Which one holds is decided over the whole clip by dynamic programming on the body's facing angle
+(yaw) from the 3D landmarks: h1 turns a yaw θ into π − θ. The cost prefers a yaw that changes at a
+steady rate (a person turning keeps turning; a second difference is cheap only then), h0 over h1 by a
+small margin, a yaw facing the camera whenever MediaPipe found a face (no face is seen from behind),
+and — in clips where faces are found at all, so the face detector works at this resolution — a yaw
+facing away when no face is found.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gma.video.landmarks import POSE_FLIP
+
+__all__ = ["apply_swaps", "facing_yaw", "resolve_swaps"]
+
+_L_SH, _R_SH, _L_HIP, _R_HIP = 11, 12, 23, 24
+
+
+def facing_yaw(pose3d: np.ndarray) -> np.ndarray:
+    """Facing angle [T] (radians) from MediaPipe world landmarks [T, 33, 3] (camera axes): 0 = facing
+    the camera, ±π = facing away, positive = turned towards the camera's +x. NaN where missing."""
+    lat = (pose3d[:, _L_SH] - pose3d[:, _R_SH]) + (pose3d[:, _L_HIP] - pose3d[:, _R_HIP])   # towards the person's left
+    up = (pose3d[:, _L_SH] + pose3d[:, _R_SH] - pose3d[:, _L_HIP] - pose3d[:, _R_HIP])       # hips → shoulders
+    fwd = np.cross(lat, up)  # left × up = forward (Anny: +X × +Z = −Y, the way the body faces)
+    return np.arctan2(fwd[:, 0], -fwd[:, 2])
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def resolve_swaps(pose3d: np.ndarray, found: np.ndarray, face: np.ndarray, swap_cost: float = 0.3,
+                  face_cost: float = 4.0, no_face_cost: float = 1.0, accel_weight: float = 4.0) -> np.ndarray:
+    """Per-frame decision [T] bool: True where the detection should be read as swapped (h1).
+
+    Frames without a detection are False (nothing to swap). Viterbi over pairs of consecutive states,
+    so that the cost can use second differences of the yaw.
+    """
+    t_all = np.nonzero(found)[0]
+    out = np.zeros(len(found), bool)
+    if len(t_all) == 0:
+        return out
+    y0 = facing_yaw(pose3d[t_all])
+    yaws = np.stack([y0, _wrap(np.pi - y0)], 1)                        # [N, 2] per hypothesis
+    unary = np.zeros((len(t_all), 2))
+    unary[:, 1] += swap_cost
+    has_face = face[t_all]
+    unary[has_face] += face_cost * (np.abs(yaws[has_face]) > np.pi / 2)
+    if has_face.any():
+        unary[~has_face] += no_face_cost * (np.abs(yaws[~has_face]) < np.pi / 3)
+    n = len(t_all)
+    if n == 1:
+        out[t_all[0]] = bool(np.argmin(unary[0]))
+        return out
+    # state k = (s_prev, s_cur) as 2 * s_prev + s_cur
+    cost = np.full(4, np.inf)
+    for sp in range(2):
+        for sc in range(2):
+            cost[2 * sp + sc] = unary[0, sp] + unary[1, sc]
+    back = np.zeros((n, 4), np.int64)
+    for i in range(2, n):
+        new = np.full(4, np.inf)
+        for sp in range(2):
+            for sc in range(2):
+                best, arg = np.inf, 0
+                for spp in range(2):
+                    k = 2 * spp + sp
+                    acc = _wrap(yaws[i, sc] - yaws[i - 1, sp]) - _wrap(yaws[i - 1, sp] - yaws[i - 2, spp])
+                    c = cost[k] + accel_weight * float(acc) ** 2
+                    if c < best:
+                        best, arg = c, k
+                new[2 * sp + sc] = best + unary[i, sc]
+                back[i, 2 * sp + sc] = arg
+        cost = new
+    k = int(np.argmin(cost))
+    states = np.zeros(n, np.int64)
+    states[n - 1], states[n - 2] = k % 2, k // 2
+    for i in range(n - 1, 1, -1):
+        k = back[i, k]
+        states[i - 2] = k // 2
+    out[t_all] = states.astype(bool)
+    return out
+
+
+def apply_swaps(pose2d: np.ndarray, pose3d: np.ndarray, hands2d: np.ndarray, swap: np.ndarray):
+    """Landmarks with left/right exchanged (and 3D depth mirrored) in frames where ``swap`` [T] is True.
+    Shapes as in :class:`~gma.video.detect.Detections`; returns new arrays."""
+    p2, p3, h2 = pose2d.copy(), pose3d.copy(), hands2d.copy()
+    p2[swap] = pose2d[swap][:, POSE_FLIP]
+    p3[swap] = pose3d[swap][:, POSE_FLIP]
+    p3[swap, :, 2] *= -1
+    h2[swap] = hands2d[swap][:, ::-1]
+    return p2, p3, h2
