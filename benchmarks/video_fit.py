@@ -1,0 +1,123 @@
+"""Figures for the video pipeline (issue 8): seconds per frame of each stage of ``gma import video``
+on a synthetic clip with known truth, the fit's joint error against that truth and its mask IoU, and
+(with ``--iper``) the same run on the real clip ``../shared/data/iper_turn_512.gif``.
+
+    python benchmarks/video_fit.py [--frames 24] [--size 256] [--threads 2] [--sheet docs/video_contact_sheet.png]
+                                   [--iper] [--iper-sheet docs/video_iper_contact_sheet.png]
+
+Needs MediaPipe (``pip install 'gma[video]'``) and a wgpu adapter (lavapipe is enough) for the
+synthetic clip. Each run starts from an empty work directory, so nothing is reused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
+JOINTS = ["coco:left_shoulder", "coco:right_shoulder", "coco:left_elbow", "coco:right_elbow", "coco:left_wrist",
+          "coco:right_wrist", "coco:left_hip", "coco:right_hip", "coco:left_knee", "coco:right_knee",
+          "coco:left_ankle", "coco:right_ankle", "coco:nose"]
+
+
+def _points_uv(rig, seq, frame_cams) -> np.ndarray:
+    """Pixels [T, P, 2] of the rig's points for a sequence's body, through ``frame_cams(t)`` -> (K, w2c)."""
+    from gma.video.fit import project
+
+    pose = torch.as_tensor(seq.body.arrays["pose"]).float()
+    rest = rig.rest(torch.as_tensor(seq.body.arrays["phenotype"]).float())
+    with torch.no_grad():
+        pts = rig.points(rig.transforms(pose, rest), rest)
+    out = []
+    for t in range(len(pose)):
+        K, w2c = (torch.as_tensor(a).float() for a in frame_cams(t))
+        out.append(project(pts[t], K, w2c[:3, :3], w2c[:3, 3]).numpy())
+    return np.stack(out)
+
+
+def _run(clip: Path, out: Path, focal, anny, sheet: str | None):
+    from gma.video import VideoImportConfig, estimate_sequence
+
+    shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(out.parent / (out.name + ".work"), ignore_errors=True)
+    t0 = time.perf_counter()
+    seq, report = estimate_sequence(clip, out, config=VideoImportConfig(focal=focal), anny=anny, progress=False)
+    total = time.perf_counter() - t0
+    if sheet:
+        Path(sheet).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy(out / "video_contact_sheet.png", sheet)
+    return seq, report, total
+
+
+def _print_stages(name: str, report: dict, total: float) -> None:
+    t = report["frames_used"]
+    secs = dict(report["seconds"])
+    print(f"\n{name}: {t} frames, total {total:.1f} s ({total / t:.2f} s/frame)")
+    print(f"  {'stage':<10}{'s total':>10}{'s/frame':>10}")
+    for k, v in secs.items():
+        print(f"  {k:<10}{v:>10.2f}{v / t:>10.3f}")
+    print(f"  detection rate {report['detection_rate']:.3f}, interpolated {report['frames_interpolated']}, "
+          f"swapped {report.get('frames_swapped_left_right')}, frames with hands {report['frames_with_hands']}")
+    print(f"  reprojection error vs landmarks {report.get('reprojection_error_px_mean')} px, "
+          f"mask IoU (fitted body vs mask) {report['mask_iou_mean']:.3f}, phenotype {report['phenotype']}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=24)
+    ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--sheet", default=None, help="copy the synthetic clip's contact sheet here")
+    ap.add_argument("--iper", action="store_true", help="also run on ../shared/data/iper_turn_512.gif")
+    ap.add_argument("--iper-sheet", default=None, help="copy the iPER clip's contact sheet here")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(args.threads)
+
+    import imageio.v3 as iio
+
+    from gma.body import load_body
+    from gma.data.synth.generate import SynthConfig, synthesize
+    from gma.video.report import mask_iou
+    from gma.video.rig import AnnyRig
+
+    anny = load_body("anny")
+    rig = AnnyRig(anny)
+    idx = [rig.index(n) for n in JOINTS]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        gt = synthesize(tmp / "gt", SynthConfig(width=args.size, height=args.size, train_frames=args.frames,
+                                                test_pose_frames=0, test_view_frames=0, texture_size=1024),
+                        body=anny, progress=False)
+        clip = tmp / "clip.mp4"
+        iio.imwrite(clip, np.stack([gt.image(i) for i in range(len(gt))]), fps=12, codec="libx264",
+                    macro_block_size=16)
+        seq, report, total = _run(clip, tmp / "seq", float(gt.cameras.K[0, 0, 0]), anny, args.sheet)
+        _print_stages(f"synthetic turn ({args.size} px, true focal)", report, total)
+        err = np.linalg.norm(_points_uv(rig, seq, seq.cameras.frame)[:, idx]
+                             - _points_uv(rig, gt, gt.cameras.frame)[:, idx], axis=-1)
+        ious = [mask_iou(seq.mask(i) > 0.5, gt.mask(i) > 0.5) for i in range(len(gt))]
+        print(f"  vs truth: joint error mean {err.mean():.2f} px, median {np.median(err):.2f}, "
+              f"90th pct {np.percentile(err, 90):.2f} px; MediaPipe mask IoU vs true mask {np.mean(ious):.3f}")
+        print(f"  true phenotype {np.round(gt.body.arrays['phenotype'], 3).tolist()}")
+    if args.iper:
+        if not IPER.is_file():
+            print(f"\n{IPER} not found; skipping the real clip")
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                _, report, total = _run(IPER, Path(tmp) / "seq", None, anny, args.iper_sheet)
+                _print_stages("iper_turn_512.gif (default focal)", report, total)
+                print(json.dumps({"mask_iou_per_frame": report["mask_iou_per_frame"]}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
