@@ -23,7 +23,6 @@ from gma.render.surfels import SurfelBuffers
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
 MAX_WORKGROUPS = 65535
-BATCH_MIN = 32
 
 
 @dataclass
@@ -79,7 +78,8 @@ class SurfelRasterizer:
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
         # on GPUs those reads are broadcasts and the plain loop is simpler.
-        self.use_subgroups = ctx.has_subgroups and ctx.is_software and 1 <= ctx.subgroup_size <= BATCH_MIN
+        # The subgroup loops keep a ballot of one round in a single u32, hence at most 32 lanes.
+        self.use_subgroups = ctx.has_subgroups and ctx.is_software and 1 <= ctx.subgroup_size <= 32
         self.last_timings: dict[str, float] = {}
 
     # -- variants -----------------------------------------------------------------------------------

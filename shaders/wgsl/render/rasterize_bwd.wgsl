@@ -80,6 +80,23 @@ fn flush(sid: u32, g: SurfelGrad) {
 }
 
 var<workgroup> batch_ids: array<u32, BATCH>;
+var<workgroup> tile_last: atomic<u32>;
+
+// Up to 4 channels as a zero-padded vec4 (no private arrays; see the subgroup path below).
+fn upstream_color4(p: u32) -> vec4<f32> {
+    let base = p * CHANNELS;
+    let last = CHANNELS - 1u;
+    return vec4<f32>(v_out_color[base], select(0.0, v_out_color[base + min(1u, last)], CHANNELS > 1u),
+                     select(0.0, v_out_color[base + min(2u, last)], CHANNELS > 2u),
+                     select(0.0, v_out_color[base + min(3u, last)], CHANNELS > 3u));
+}
+
+fn background4() -> vec4<f32> {
+    let last = CHANNELS - 1u;
+    return vec4<f32>(background[0], select(0.0, background[min(1u, last)], CHANNELS > 1u),
+                     select(0.0, background[min(2u, last)], CHANNELS > 2u),
+                     select(0.0, background[min(3u, last)], CHANNELS > 3u));
+}
 
 @compute @workgroup_size(256)
 #if USE_SUBGROUPS
@@ -98,12 +115,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // later surfels, the background term for colour included (out = sum w c + T_final bg).
     var T = select(1.0, final_t[p], inside);
     let last = select(0u, last_index[p], inside);
+#if USE_SUBGROUPS
+    // At most 4 channels here, kept in vec4 registers: any dynamically indexed private array would be
+    // placed in per-lane scratch memory by CPU drivers, making every access in the loop a gather.
+    let v_col4 = select(vec4<f32>(0.0), upstream_color4(p), inside);
+    var acc_col4 = T * background4();
+#else
     var v_col: array<vec4<f32>, CHUNKS>;
     var acc_col: array<vec4<f32>, CHUNKS>;
     for (var c = 0u; c < CHANNELS; c++) {
         v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
         acc_col[c / 4u][c % 4u] = T * background[c];
     }
+#endif
     let v_a = select(0.0, v_out_alpha[p], inside);
     let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
                                                    v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
@@ -111,7 +135,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var acc_nd = vec4<f32>(0.0);
 
     let range = ranges[tile];
-    let count = range.y - range.x;
+    if lid == 0u {
+        atomicStore(&tile_last, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&tile_last, last);
+    // Batches behind every pixel's last contributor need no replay.
+    let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
     let num_batches = ceil_div(count, BATCH);
     // Only the intersections before the tile's furthest last contributor matter.
     for (var bi = 0u; bi < num_batches; bi++) {
@@ -145,22 +175,25 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let block_last = subgroupMax(last);
         for (var jj = 0u; jj < m; jj += SG) {
             let j0 = m - min(m, jj + SG);          // this round covers local slots [j0, m - jj)
+            if start + j0 >= block_last {
+                continue;                          // behind every pixel of the subgroup
+            }
+            let n = m - jj - j0;
             let slot = min(j0 + sg_lane, m - 1u);
+            let mine_bounds = batch_bounds[slot];
+            let hit = sg_lane < n && start + j0 + sg_lane < block_last && all(block_hi >= mine_bounds.xy)
+                      && all(block_lo <= mine_bounds.zw);
+            var hits = subgroupBallot(hit).x;
+            if hits == 0u {
+                continue;
+            }
             let mine = batch_surf[slot];
             let mine_col = batch_color[slot];
-            let mine_bounds = batch_bounds[slot];
             let mine_id = batch_ids[slot];
-            let n = m - jj - j0;
-            for (var kk = 0u; kk < n; kk++) {
-                let k = n - 1u - kk;                // back to front within the round
-                let idx = start + j0 + k;            // local intersection index in the tile
-                if idx >= block_last {
-                    continue;
-                }
-                let bounds = subgroupShuffle(mine_bounds, k);
-                if any(block_hi < bounds.xy) || any(block_lo > bounds.zw) {
-                    continue;
-                }
+            while hits != 0u {
+                let k = firstLeadingBit(hits);     // back to front
+                hits &= ~(1u << k);
+                let idx = start + j0 + k;          // local intersection index in the tile
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
                                         subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
                 let col = subgroupShuffle(mine_col, k);
@@ -170,7 +203,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 let ra = 1.0 / (1.0 - alpha);
                 let T_i = T * ra;
                 let w = select(0.0, alpha * T_i, contrib);
-                var v_alpha = dot(v_col[0], T_i * col - acc_col[0] * ra)
+                var v_alpha = dot(v_col4, T_i * col - acc_col4 * ra)
                             + v_a * (T_i - acc_a * ra)
                             + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
                 v_alpha = select(0.0, v_alpha, contrib);
@@ -178,8 +211,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
                 alpha_backward(s, px, v_alpha, &g);
                 g.v_nd = w * v_nd;
-                let g_col = w * v_col[0];
-                acc_col[0] += w * col;
+                let g_col = w * v_col4;
+                acc_col4 += w * col;
                 acc_a += w;
                 acc_nd += w * s.normal_depth;
                 T = select(T, T_i, contrib);

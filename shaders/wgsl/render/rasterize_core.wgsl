@@ -125,23 +125,28 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         let block_lo = subgroupMin(px);
         let block_hi = subgroupMax(px);
         for (var j = 0u; j < m; j += SG) {
-            let slot = min(j + sg_lane, m - 1u);
-            let mine = batch_surf[slot];
-            let mine_col = batch_color[slot];
-            let mine_bounds = batch_bounds[slot];
             if subgroupAll(done) {
+                break;
+            }
+            // Which of the next SG surfels can touch this subgroup's pixel block? Only their data is
+            // read and shuffled; most steps touch none, as surfels are small next to a tile.
+            let slot = min(j + sg_lane, m - 1u);
+            let mine_bounds = batch_bounds[slot];
+            let hit = j + sg_lane < m && all(block_hi >= mine_bounds.xy) && all(block_lo <= mine_bounds.zw);
+            var hits = subgroupBallot(hit).x;
+            if hits == 0u {
                 continue;
             }
-            for (var k = 0u; k < SG; k++) {
-                let bounds = subgroupShuffle(mine_bounds, k);
-                if any(block_hi < bounds.xy) || any(block_lo > bounds.zw) {
-                    continue;
-                }
+            let mine = batch_surf[slot];
+            let mine_col = batch_color[slot];
+            while hits != 0u {
+                let k = firstTrailingBit(hits);   // front to back
+                hits &= hits - 1u;
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
                                         subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
                 let alpha = surfel_alpha(s, px);
                 let next_T = T * (1.0 - alpha);
-                let contrib = j + k < m && alpha >= ALPHA_THRESHOLD && !done;
+                let contrib = alpha >= ALPHA_THRESHOLD && !done;
                 let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
                 let use_it = contrib && !saturate;
                 done = done || saturate;
