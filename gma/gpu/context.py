@@ -178,6 +178,28 @@ class GpuContext:
             raw = self.device.queue.read_buffer(buffer, offset, nbytes)
         return np.frombuffer(raw, dtype=dtype).copy()
 
+    def read_many(self, items: list[tuple[wgpu.GPUBuffer, object, int]]) -> list[np.ndarray]:
+        """Copy several buffers back in one transfer: ``items`` are (buffer, dtype, count). All copies go
+        into one staging buffer with one submission and one map, instead of a wait per buffer."""
+        sizes = [int(count) * np.dtype(dtype).itemsize for _, dtype, count in items]
+        offsets = np.concatenate([[0], np.cumsum([(n + 3) // 4 * 4 for n in sizes])]).astype(int)
+        total = int(offsets[-1])
+        if total == 0:
+            return [np.zeros(0, dtype) for _, dtype, _ in items]
+        staging = self.device.create_buffer(label="read_many", size=total,
+                                            usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST)
+        enc = self.device.create_command_encoder()
+        for (buf, _, _), off, n in zip(items, offsets, sizes):
+            if n:
+                enc.copy_buffer_to_buffer(buf, 0, staging, int(off), (n + 3) // 4 * 4)
+        with self.transfers.download(total):
+            self.device.queue.submit([enc.finish()])
+            staging.map_sync(wgpu.MapMode.READ)
+            raw = np.frombuffer(staging.read_mapped(), np.uint8).copy()
+            staging.unmap()
+        staging.destroy()
+        return [raw[off:off + n].view(np.dtype(dtype)) for (_, dtype, _), off, n in zip(items, offsets, sizes)]
+
     def submit(self, encoder: wgpu.GPUCommandEncoder) -> None:
         self.device.queue.submit([encoder.finish()])
 

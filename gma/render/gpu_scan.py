@@ -6,6 +6,7 @@ import numpy as np
 import wgpu
 
 from gma.gpu import GpuContext
+from gma.gpu.workspace import Workspace
 
 SCAN_BLOCK = 1024  # mirrors shaders/wgsl/render/scan_blocks.wgsl
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
@@ -15,16 +16,19 @@ class ExclusiveScan:
     """``out[i] = sum(values[:i])``, optionally of ``values[index[i]]`` (a gather), for a count known
     when encoding."""
 
-    def __init__(self, ctx: GpuContext):
+    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None):
         self.ctx = ctx
+        self.workspace = workspace or Workspace(ctx)
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, values: wgpu.GPUBuffer, out: wgpu.GPUBuffer,
-               count: int, index: wgpu.GPUBuffer | None = None) -> None:
+               count: int, index: wgpu.GPUBuffer | None = None, level: int = 0) -> None:
         ctx = self.ctx
         if count == 0:
             return
         blocks = (count + SCAN_BLOCK - 1) // SCAN_BLOCK
-        sums = ctx.buffer(4 * blocks, "scan.block_sums")
+        # Scratch per recursion level. The 16-byte uniform is fresh per call: queue writes land before the
+        # whole submission, so a shared one would break two scans encoded into one submission.
+        sums = self.workspace.get(f"scan.block_sums.{level}", 4 * blocks)
         params = ctx.upload(np.array([count, 0, 0, 0], np.uint32), "scan.params", UNIFORM)
         gather = index is not None
         blocks_p = ctx.compute_pipeline("render/scan_blocks.wgsl", {"GATHER": gather})
@@ -35,8 +39,8 @@ class ExclusiveScan:
         cp.dispatch_workgroups(blocks)
         cp.end()
         if blocks > 1:
-            offsets = ctx.buffer(4 * blocks, "scan.block_offsets")
-            self.encode(encoder, sums, offsets, blocks)
+            offsets = self.workspace.get(f"scan.block_offsets.{level}", 4 * blocks)
+            self.encode(encoder, sums, offsets, blocks, level=level + 1)
             add_p = ctx.compute_pipeline("render/scan_add.wgsl")
             cp = encoder.begin_compute_pass()
             cp.set_pipeline(add_p)

@@ -6,6 +6,7 @@ import numpy as np
 import wgpu
 
 from gma.gpu import GpuContext
+from gma.gpu.workspace import Workspace
 
 SORT_BLOCK = 2048  # keys per workgroup; mirrors shaders/wgsl/common/sort_types.wgsl
 RADIX_BITS = 4
@@ -28,8 +29,9 @@ class RadixSorter:
     are then indirect. ``capacity`` bounds the count and sizes the scratch buffers.
     """
 
-    def __init__(self, ctx: GpuContext):
+    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None):
         self.ctx = ctx
+        self.workspace = workspace or Workspace(ctx)
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None) -> None:
@@ -37,9 +39,9 @@ class RadixSorter:
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
         passes += passes % 2  # an even number of passes leaves the result in the caller's buffers
-        hist = ctx.buffer(16 * 4 * sort_blocks(capacity), "sort.hist")
-        keys_tmp = ctx.buffer(4 * capacity, "sort.keys_tmp")
-        vals_tmp = ctx.buffer(4 * capacity, "sort.vals_tmp")
+        hist = self.workspace.get("sort.hist", 16 * 4 * sort_blocks(capacity))
+        keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
+        vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
         count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4 * i}) for i in range(passes)]
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl")

@@ -14,6 +14,8 @@ import numpy as np
 import wgpu
 
 from gma.gpu import GpuContext, PassTimer
+from gma.gpu.context import STORAGE
+from gma.gpu.workspace import Workspace
 from gma.render.camera import Camera
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
@@ -72,8 +74,9 @@ class SurfelRasterizer:
 
     def __init__(self, ctx: GpuContext):
         self.ctx = ctx
-        self.sorter = RadixSorter(ctx)
-        self.scan = ExclusiveScan(ctx)
+        self.workspace = Workspace(ctx)
+        self.sorter = RadixSorter(ctx, self.workspace)
+        self.scan = ExclusiveScan(ctx, self.workspace)
         self.isect_capacity_hint = 1 << 16
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
@@ -107,33 +110,41 @@ class SurfelRasterizer:
         cp.end()
 
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
-                timer: PassTimer | None = None) -> ProjectionState:
-        """Encode projection, depth sort and the scan of tile counts in depth order."""
+                timer: PassTimer | None = None, keep: bool = True) -> ProjectionState:
+        """Encode projection, depth sort and the scan of tile counts in depth order. With ``keep`` the
+        buffers the backward pass reads are allocated for this call; the rest is workspace scratch."""
         ctx, n = self.ctx, surfels.count
         if n > MAX_WORKGROUPS * 256:
             raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
         params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
                                surfels.channels)
+        scratch = self.workspace.get
+
+        def kept(label, nbytes, usage=STORAGE):
+            return ctx.buffer(nbytes, label, usage) if keep else scratch(label, nbytes, usage)
+
         st = ProjectionState(
-            params=ctx.upload(params, "params", UNIFORM),
-            projected=ctx.buffer(64 * n, "projected"),
-            tile_rects=ctx.buffer(16 * n, "tile_rects"),
-            pixel_bounds=ctx.buffer(16 * n, "pixel_bounds"),
-            tile_counts=ctx.buffer(4 * n, "tile_counts"),
-            depth_keys=ctx.buffer(4 * n, "depth_keys"),
-            depth_order=ctx.buffer(4 * n, "depth_order"),
-            isect_offsets=ctx.buffer(4 * n, "isect_offsets"),
-            stats=ctx.buffer(16, "stats"),
-            sort_info=ctx.buffer(16, "isect_sort.info", INDIRECT),
-            elem_info=ctx.buffer(16, "isect_elem.info", INDIRECT),
+            params=kept("params", params.nbytes, UNIFORM),
+            projected=kept("projected", 64 * n),
+            tile_rects=scratch("tile_rects", 16 * n),
+            pixel_bounds=kept("pixel_bounds", 16 * n),
+            tile_counts=kept("tile_counts", 4 * n),
+            depth_keys=scratch("depth_keys", 4 * n),
+            depth_order=scratch("depth_order", 4 * n),
+            isect_offsets=scratch("isect_offsets", 4 * n),
+            stats=scratch("stats", 16),
+            sort_info=scratch("isect_sort.info", 16, INDIRECT),
+            elem_info=scratch("isect_elem.info", 16, INDIRECT),
         )
+        ctx.write(st.params, params)
         if n == 0:
             return st
         p = ctx.compute_pipeline("render/project_fwd.wgsl")
         self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
                                     st.depth_order, st.pixel_bounds], ((n + 255) // 256, 1, 1), "project", timer)
-        depth_info = ctx.upload(dispatch_info(n, SORT_BLOCK), "depth_sort.info", INDIRECT)
+        depth_info = scratch("depth_sort.info", 16, INDIRECT)
+        ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
         self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, 32, timer)
         self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
         self._setup(encoder, st, timer)
@@ -151,9 +162,14 @@ class SurfelRasterizer:
         ctx, n = self.ctx, surfels.count
         tx, ty = tile_grid(camera.width, camera.height)
         cap = max(capacity, 1)
-        isect_tiles = ctx.buffer(4 * cap, "isect_tiles")
-        isect_ids = ctx.buffer(4 * cap, "isect_ids")
-        ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
+        isect_tiles = self.workspace.get("isect_tiles", 4 * cap)
+        if isinstance(target, wgpu.GPUTextureView):  # nothing outlives the frame: reuse
+            isect_ids = self.workspace.get("isect_ids", 4 * cap)
+            ranges = self.workspace.get("tile_ranges", 8 * tx * ty)
+        else:  # kept in the ForwardState for the backward pass
+            isect_ids = ctx.buffer(4 * cap, "isect_ids")
+            ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
+        encoder.clear_buffer(ranges)  # tiles without intersections must read as empty
         if n > 0:
             self._setup(encoder, st, timer)  # again: the capacity may have been raised since projection
             emit = ctx.compute_pipeline("render/emit_isects.wgsl")
@@ -164,7 +180,7 @@ class SurfelRasterizer:
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl")
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges], st.elem_info, "bin", timer)
         defines = self.raster_defines(surfels.channels)
-        empty = ctx.buffer(64, "empty")
+        empty = self.workspace.get("empty", 64)
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
         if isinstance(target, wgpu.GPUTextureView):
             raster = ctx.compute_pipeline("render/rasterize_texture.wgsl", defines)
@@ -244,14 +260,11 @@ class SurfelRasterizer:
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
-        f32 = np.float32
-        return SurfelGrads(
-            means=ctx.read(outs[0], f32, 3 * n).reshape(n, 3),
-            quats=ctx.read(outs[1], f32, 4 * n).reshape(n, 4),
-            scales=ctx.read(outs[2], f32, 2 * n).reshape(n, 2),
-            opacities=ctx.read(outs[3], f32, n),
-            colors=ctx.read(v_colors, f32, c * n).reshape(n, c),
-        )
+        means, quats, scales, opacities, colors = ctx.read_many(
+            [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
+             (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
+        return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
+                           colors.reshape(n, c))
 
     def backward_defines(self, channels: int) -> dict:
         defines = self.raster_defines(channels)
@@ -265,7 +278,7 @@ class SurfelRasterizer:
         from time to time (it reads 4 bytes) to adapt the capacity."""
         enc = self.ctx.device.create_command_encoder()
         cap = self.isect_capacity_hint
-        st = self.project(enc, surfels, camera, cap, timer)
+        st = self.project(enc, surfels, camera, cap, timer, keep=False)
         self.bin_and_rasterize(enc, surfels, camera, st, cap, background, view, timer)
         if timer:
             timer.resolve(enc)
@@ -308,11 +321,10 @@ class ImageOutputs:
 
 
 def read_outputs(ctx: GpuContext, state: ForwardState) -> ImageOutputs:
+    """Copy a forward render's images back to the host in one transfer."""
     h, w, c = state.camera.height, state.camera.width, state.channels
-    f32 = np.float32
-    return ImageOutputs(
-        color=ctx.read(state.color, f32, h * w * c).reshape(h, w, c),
-        alpha=ctx.read(state.alpha, f32, h * w).reshape(h, w, 1),
-        normal=ctx.read(state.normal, f32, h * w * 3).reshape(h, w, 3),
-        depth=ctx.read(state.depth, f32, h * w).reshape(h, w, 1),
-    )
+    color, alpha, normal, depth = ctx.read_many([(state.color, np.float32, h * w * c), (state.alpha, np.float32, h * w),
+                                                 (state.normal, np.float32, h * w * 3),
+                                                 (state.depth, np.float32, h * w)])
+    return ImageOutputs(color.reshape(h, w, c), alpha.reshape(h, w, 1), normal.reshape(h, w, 3),
+                        depth.reshape(h, w, 1))
