@@ -1,0 +1,154 @@
+"""``Avatar``: a fitted GMA (model + body identity + edit history) and its ``.gma`` file.
+
+File layout (one safetensors file; never pickle, so opening a stranger's avatar runs no code):
+
+    tensors   model.*            features and decoder weights (``AvatarModel.state_dict()``)
+              rest_vertices      [V, 3] canonical body vertices at the identity shape (positional encoding
+                                 and offset directions are derived from these, so decoding is reproducible)
+              shape              [S] body identity (Anny phenotype / SMPL-X betas)
+    metadata  format = "gma", version = "1", body = model id, config = AvatarConfig JSON,
+              history = JSON list of edit records, info = JSON dict (fit summary, free-form)
+
+Writes are atomic (temporary file, fsync, rename). A file from a newer format version is refused with
+a message that names the file and both versions.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from gma.avatar.config import AvatarConfig
+from gma.avatar.model import AvatarModel, DecodedAvatar
+
+__all__ = ["FORMAT_VERSION", "Avatar", "AvatarFileError"]
+
+FORMAT_VERSION = 1
+_MAGIC = "gma"
+
+
+class AvatarFileError(ValueError):
+    """A ``.gma`` file that cannot be read (the message names the file)."""
+
+
+@dataclass(eq=False)
+class Avatar:
+    """A fitted avatar. ``model`` holds the layers; ``shape`` [S] the body identity; ``history`` the edit
+    records (dicts, oldest first); ``info`` free-form metadata (fit summary)."""
+
+    model: AvatarModel
+    body_name: str
+    shape: torch.Tensor
+    rest_vertices: torch.Tensor
+    history: list[dict] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+    @property
+    def config(self) -> AvatarConfig:
+        return self.model.config
+
+    @property
+    def render_layer(self) -> str:
+        """The layer a finished avatar shows: coarse surfels for the mesh-only ablation, else fine."""
+        return "coarse" if self.config.representation == "mesh_only" else "fine"
+
+    @staticmethod
+    def create(config: AvatarConfig, body, shape: torch.Tensor | None = None, seed: int = 0) -> Avatar:
+        """A fresh (unfitted) avatar on ``body`` with identity ``shape`` (default: the body's)."""
+        params = body.canonical_params(None if shape is None else torch.as_tensor(shape, dtype=torch.float32))
+        with torch.no_grad():
+            rest = body.rest_vertices(params).float()
+        model = AvatarModel(config, body.faces, rest, seed=seed)
+        return Avatar(model, body.name, params["shape"].clone(), rest)
+
+    @torch.no_grad()
+    def decode(self, layer: str | None = None) -> DecodedAvatar:
+        """Decode all faces (no autograd): the surfels to upload. Once per load or edit."""
+        return self.model.decode(layer or self.render_layer).detach()
+
+    # -- file IO ---------------------------------------------------------------------------------------
+    def to_bytes(self) -> bytes:
+        from safetensors.torch import save
+
+        tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
+        tensors["rest_vertices"] = self.rest_vertices.contiguous()
+        tensors["shape"] = self.shape.float().contiguous()
+        meta = {"format": _MAGIC, "version": str(FORMAT_VERSION), "body": self.body_name,
+                "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
+                "info": json.dumps(self.info)}
+        return save(tensors, metadata=meta)
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the avatar to ``path`` atomically; returns the path."""
+        from gma.data.atomic import atomic_write_bytes
+
+        path = Path(path)
+        atomic_write_bytes(path, self.to_bytes())
+        return path
+
+    @staticmethod
+    def load(path: str | os.PathLike, body=None) -> Avatar:
+        """Read a ``.gma`` file. ``body`` is the body model to bind to (default: ``load_body`` of the id the
+        file names). Raises FileNotFoundError or :class:`AvatarFileError`, naming the file."""
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: avatar file not found")
+        tensors, meta = read_gma(path)
+        try:
+            config = AvatarConfig.from_dict(json.loads(meta["config"]))
+            history, info = json.loads(meta.get("history", "[]")), json.loads(meta.get("info", "{}"))
+        except (ValueError, TypeError, KeyError) as exc:
+            raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from exc
+        if body is None:
+            from gma.body import load_body
+
+            body = load_body(meta["body"])
+        if body.name != meta["body"]:
+            raise AvatarFileError(f"{path}: avatar is bound to body {meta['body']!r}, got {body.name!r}")
+        for key in ("rest_vertices", "shape"):
+            if key not in tensors:
+                raise AvatarFileError(f"{path}: missing tensor {key!r}")
+        rest = tensors["rest_vertices"].float()
+        if tuple(rest.shape) != (body.num_vertices, 3):
+            raise AvatarFileError(f"{path}: rest_vertices is {list(rest.shape)}, body {body.name} has "
+                                  f"{body.num_vertices} vertices")
+        model = AvatarModel(config, body.faces, rest)
+        state = {k[len("model."):]: v for k, v in tensors.items() if k.startswith("model.")}
+        try:
+            model.load_state_dict(state)
+        except RuntimeError as exc:
+            raise AvatarFileError(f"{path}: tensors do not match the avatar config ({exc})") from exc
+        return Avatar(model, meta["body"], tensors["shape"].float(), rest, history, info)
+
+
+def read_gma(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """(tensors, metadata) of a ``.gma`` file after format and version checks."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load
+
+    data = path.read_bytes()
+    try:
+        tensors = load(data)
+        from safetensors import safe_open
+
+        with safe_open(str(path), "pt") as f:
+            meta = f.metadata() or {}
+    except (SafetensorError, ValueError, OSError, RuntimeError) as exc:
+        raise AvatarFileError(f"{path}: not a .gma avatar (not a readable safetensors file: {exc})") from exc
+    if meta.get("format") != _MAGIC:
+        raise AvatarFileError(f"{path}: safetensors file without GMA avatar metadata (format="
+                              f"{meta.get('format')!r})")
+    try:
+        version = int(meta.get("version", ""))
+    except ValueError:
+        raise AvatarFileError(f"{path}: bad format version {meta.get('version')!r}") from None
+    if version > FORMAT_VERSION:
+        raise AvatarFileError(f"{path}: avatar format version {version} is newer than this GMA supports "
+                              f"({FORMAT_VERSION}); update GMA to open it")
+    if version < 1:
+        raise AvatarFileError(f"{path}: bad format version {version}")
+    return tensors, meta

@@ -1,0 +1,75 @@
+"""GPU path for showing an avatar: the decoded surfels are uploaded once (per load or edit), and every
+frame only the bone transforms go to the GPU, where ``GpuPoser`` skins the morphed mesh and places the
+surfels straight into the renderer's buffers (no per-frame readback until an image is wanted)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from gma.avatar.avatar import Avatar
+from gma.avatar.model import DecodedAvatar
+
+__all__ = ["AvatarRenderer", "open_view_source"]
+
+
+class AvatarRenderer:
+    """Offline renderer of one avatar (videos, evaluation previews).
+
+        r = AvatarRenderer(ctx, avatar, body)
+        img = r.render(params, camera, background)     # float32 [H, W, 3]
+    """
+
+    def __init__(self, ctx, avatar: Avatar, body, decoded: DecodedAvatar | None = None):
+        from gma.body.gpu_posing import GpuPoser
+        from gma.render import SurfelBuffers, SurfelRasterizer
+
+        self.ctx, self.avatar, self.body = ctx, avatar, body
+        self.decoded = decoded or avatar.decode()
+        self.poser = GpuPoser(ctx, body.faces, body.skin_indices, body.skin_weights)
+        self.poser.set_surfels(self.decoded.binding)
+        n = len(self.decoded.binding)
+        self.surfels = SurfelBuffers.allocate(ctx, n, 3)
+        ctx.write(self.surfels.colors, self.decoded.colors.numpy().astype(np.float32))
+        ctx.write(self.surfels.opacities, self.decoded.opacities.numpy().astype(np.float32))
+        self.rasterizer = SurfelRasterizer(ctx)
+        self._rest_key = None
+
+    def set_params(self, params: dict) -> None:
+        """Pose for body ``params`` (shape defaults to the avatar's identity): rest vertices are uploaded
+        only when shape or expression change, bone transforms every call."""
+        params = self.body.check_params({"shape": self.avatar.shape, **params})
+        key = params["shape"].numpy().tobytes() + params["expression"].numpy().tobytes()
+        with torch.no_grad():
+            if key != self._rest_key:
+                rest = self.body.rest_vertices(params) + self.decoded.vertex_offsets
+                self.poser.set_rest_vertices(rest)
+                self._rest_key = key
+            self.poser.pose(self.body.bone_transforms(params), self.surfels.means, self.surfels.quats,
+                            self.surfels.scales)
+
+    def render(self, params: dict, camera, background=(1.0, 1.0, 1.0)) -> np.ndarray:
+        """Posed render as float32 [H, W, 3] (reads the image back)."""
+        from gma.render import read_outputs
+
+        self.set_params(params)
+        state = self.rasterizer.forward(self.surfels, camera, np.asarray(background, np.float32))
+        return read_outputs(self.ctx, state).color
+
+
+def open_view_source(ctx, path):
+    """A ``gma.view.BodySource`` for the avatar file at ``path`` (what ``gma view avatar.gma`` opens)."""
+    from pathlib import Path
+
+    from gma.view.source import BodySource
+
+    avatar = Avatar.load(path)
+    from gma.body import load_body
+
+    body = load_body(avatar.body_name)
+    dec = avatar.decode()
+    src = BodySource(ctx, body, dec.binding, dec.colors.numpy(), dec.opacities.numpy(), name=Path(path).name,
+                     vertex_offsets=dec.vertex_offsets)
+    src.set_params({"shape": avatar.shape})
+    src.avatar, src.decoded = avatar, dec  # for the edit tools: features live on avatar.model
+    return src

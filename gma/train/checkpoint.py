@@ -1,0 +1,51 @@
+"""Atomic training checkpoints (safetensors: model + Adam state; JSON metadata: step, stage, history).
+No pickle: ``torch.save`` would make a checkpoint an executable file."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+from gma.data.atomic import atomic_write_bytes
+
+__all__ = ["load_checkpoint", "save_checkpoint"]
+
+
+def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.Optimizer, meta: dict) -> None:
+    """Write model parameters, the optimiser's per-parameter state and ``meta`` (JSON-able) atomically."""
+    from safetensors.torch import save
+
+    tensors = {f"model.{k}": v.detach().contiguous() for k, v in model.state_dict().items()}
+    state = optimizer.state_dict()
+    for pid, st in state["state"].items():
+        for name, value in st.items():
+            t = value if isinstance(value, torch.Tensor) else torch.tensor(value)
+            tensors[f"opt.{pid}.{name}"] = t.detach().contiguous()
+    meta = {**meta, "param_groups": [{k: v for k, v in g.items() if k != "params"} | {"params": g["params"]}
+                                     for g in state["param_groups"]]}
+    atomic_write_bytes(path, save(tensors, metadata={"meta": json.dumps(meta)}))
+
+
+def load_checkpoint(path: Path, model: torch.nn.Module, optimizer_factory) -> tuple[torch.optim.Optimizer, dict]:
+    """Restore ``model`` from ``path``; ``optimizer_factory(meta)`` builds the optimiser of the stage the
+    checkpoint was in, whose state is then restored. Returns (optimizer, meta)."""
+    from safetensors import safe_open
+    from safetensors.torch import load_file
+
+    try:
+        tensors = load_file(str(path))
+        with safe_open(str(path), "pt") as f:
+            meta = json.loads(f.metadata()["meta"])
+    except Exception as exc:  # a damaged checkpoint must say which file
+        raise ValueError(f"{path}: unreadable checkpoint ({exc}); delete it to start over") from exc
+    model.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
+    opt = optimizer_factory(meta)
+    state: dict = {}
+    for key, value in tensors.items():
+        if key.startswith("opt."):
+            _, pid, name = key.split(".", 2)
+            state.setdefault(int(pid), {})[name] = value
+    opt.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
+    return opt, meta

@@ -1,0 +1,111 @@
+"""Fitting configuration as dataclasses (the CLI is built from them, see ``gma.train.cli_config``),
+and the quick / full presets."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import asdict, dataclass, fields
+
+from gma.avatar.config import AvatarConfig, doc
+
+__all__ = ["PRESETS", "FitConfig", "LossWeights", "preset"]
+
+TRAINING_MODES = ("two_stage", "one_stage")
+
+
+@dataclass
+class LossWeights:
+    """Weights of one stage's loss terms (picture: L1, SSIM, mask, LPIPS; geometry: Laplacian, relative
+    edge, 2DGS normal consistency). Defaults are the paper's stage 1."""
+
+    l1: float = doc(0.8, "L1 colour loss")
+    ssim: float = doc(0.2, "1 - SSIM (gaussian window 11, sigma 1.5)")
+    mask: float = doc(0.1, "L1 between rendered alpha and the person mask (removes floating surfels)")
+    lpips: float = doc(0.0, "LPIPS (only when its weights are installed locally; else skipped)")
+    lap: float = doc(1000.0, "Laplacian of the mesh-layer displacement (mean squared norm)")
+    edge: float = doc(100.0, "relative edge-length change, morphed vs body mesh (mean squared)")
+    normal: float = doc(0.05, "2DGS normal consistency: rendered normals vs normals of the rendered depth")
+
+
+def _stage2_weights() -> LossWeights:
+    return LossWeights(lap=100.0, edge=10.0, normal=0.0, lpips=0.02)
+
+
+@dataclass
+class FitConfig:
+    """Everything ``gma fit`` does; saved (resolved) as ``config.json`` in the fit's work folder."""
+
+    preset: str = doc("quick", "quick (2-core CPU, minutes) or full (GPU); other options override it")
+    seed: int = doc(0, "seeds the avatar init and the frame order: same seed, same result")
+    training: str = doc("two_stage", "two_stage (paper) or one_stage (ablation: all at once)")
+    stage1_steps: int = doc(80, "steps of stage 1 (geometry: coarse surfels, mesh layer)")
+    stage2_steps: int = doc(160, "steps of stage 2 (texture: fine surfels; F_coarse, f_geo frozen)")
+    resolution: int = doc(128, "longest image side the fit renders at (images are area-downsampled)")
+    max_frames: int = doc(0, "use at most this many training frames, evenly spaced (0: all)")
+    lr_features: float = doc(0.05, "Adam learning rate of f_geo, f_tex (and free params of 'direct')")
+    lr_decoders: float = doc(0.005, "Adam learning rate of the decoder MLPs")
+    lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
+    background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
+    cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (2x faster on CPU)")
+    threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is fastest on a small CPU: torch and the "
+                            "lavapipe rasteriser compete for cores (measured 3-6x slower torch with 2 on 2 cores)")
+    decoders: str = doc("", "frozen shared decoders (a .gma file): fit only the features")
+    checkpoint_every: int = doc(50, "steps between atomic checkpoints (also at each stage's end)")
+    log_every: int = doc(10, "steps between loss records in metrics.json")
+    preview_every: int = doc(100, "steps between preview renders (0: only at the end)")
+    weights1: LossWeights = dataclasses.field(default_factory=LossWeights,
+                                              metadata={"doc": "stage 1 loss weights"})
+    weights2: LossWeights = dataclasses.field(default_factory=_stage2_weights,
+                                              metadata={"doc": "stage 2 loss weights"})
+    avatar: AvatarConfig = dataclasses.field(default_factory=AvatarConfig,
+                                             metadata={"doc": "the representation"})
+
+    def __post_init__(self):
+        if self.training not in TRAINING_MODES:
+            raise ValueError(f"training must be one of {TRAINING_MODES}, got {self.training!r}")
+        if self.stage1_steps < 0 or self.stage2_steps < 0 or self.resolution < 8:
+            raise ValueError("steps must be >= 0 and resolution >= 8")
+
+    @property
+    def total_steps(self) -> int:
+        return self.stage1_steps + self.stage2_steps
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @staticmethod
+    def from_dict(d: dict) -> FitConfig:
+        d = dict(d)
+        for name, cls in (("weights1", LossWeights), ("weights2", LossWeights), ("avatar", AvatarConfig)):
+            if name in d and isinstance(d[name], dict):
+                d[name] = cls(**d[name])
+        known = {f.name for f in fields(FitConfig)}
+        if set(d) - known:
+            raise ValueError(f"unknown fit config keys {sorted(set(d) - known)}")
+        return FitConfig(**d)
+
+
+# Preset = overrides of the defaults. quick: fits within minutes on a 2-core CPU through lavapipe
+# (few, small renders; 2 fine surfels per face); full: the paper-like setting for a real GPU.
+PRESETS: dict[str, dict] = {
+    "quick": {"stage1_steps": 80, "stage2_steps": 160, "resolution": 128,
+              "avatar": {"fine_per_face": 2, "feature_dim": 16}},
+    "full": {"stage1_steps": 3000, "stage2_steps": 5000, "resolution": 512, "checkpoint_every": 500,
+             "log_every": 50, "preview_every": 1000, "lr_decay": 0.05,
+             "avatar": {"fine_per_face": 4, "feature_dim": 32}},
+}
+
+
+def preset(name: str, **overrides) -> FitConfig:
+    """The preset ``name`` with ``overrides`` (nested dicts for ``avatar``/``weights1``/``weights2``)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
+    d = FitConfig().to_dict()
+    for src in (PRESETS[name], overrides):
+        for k, v in src.items():
+            if isinstance(v, dict):
+                d[k] = {**d[k], **v}
+            else:
+                d[k] = v
+    d["preset"] = name
+    return FitConfig.from_dict(d)

@@ -1,0 +1,31 @@
+"""One differentiable render of a decoded avatar for one training frame (torch posing + WGSL raster)."""
+
+from __future__ import annotations
+
+import torch
+
+from gma.avatar.model import DecodedAvatar
+from gma.avatar.posing import PosedSurfels, backfacing_mask, pose_surfels
+from gma.render import RenderOutput, rasterize
+from gma.train.data import FrameSet
+
+__all__ = ["render_frame"]
+
+
+def render_frame(decoded: DecodedAvatar, body, frames: FrameSet, t: int, background: float, ctx=None,
+                 cull: bool = True, on_means=None) -> tuple[RenderOutput, PosedSurfels]:
+    """Pose ``decoded`` for frame ``t`` of ``frames`` and render it at the frames' resolution.
+
+    ``on_means`` (optional) is registered as a gradient hook on the surfel means handed to the renderer:
+    it fires when the renderer's backward has finished (the trainer times that split with it)."""
+    posed = pose_surfels(decoded, body.faces, body.skin_indices, body.skin_weights, frames.rest[t], frames.bones[t])
+    means, quats, scales, colors, opac = (posed[k] for k in ("means", "quats", "scales", "colors", "opacities"))
+    if cull:
+        keep = backfacing_mask(posed["vertices"], body.faces, decoded.binding.face_id, frames.w2c[t])
+        means, quats, scales, colors, opac = means[keep], quats[keep], scales[keep], colors[keep], opac[keep]
+    if on_means is not None and means.requires_grad:
+        means.register_hook(on_means)
+    h, w = frames.images.shape[1:3]
+    out = rasterize(means, quats, scales, opac, colors, frames.w2c[t], frames.K[t], w, h,
+                    background=torch.full((3,), float(background)), ctx=ctx)
+    return out, posed

@@ -1,0 +1,240 @@
+"""The two-stage fit (``gma fit``): stage 1 fits geometry through one coarse surfel per face (the mesh
+layer), stage 2 the fine surfels with F_coarse and f_geo frozen. Ablations switch to one stage, to the
+mesh layer only, or to direct per-surfel parameters.
+
+Everything a run produces lands in a work folder beside the output (``avatar.gma`` -> ``avatar.fit/``):
+``config.json`` (resolved), ``checkpoint.safetensors`` (atomic, every ``checkpoint_every`` steps),
+``metrics.json`` (loss history, timing split), ``previews/`` (render | target images).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from gma.avatar.avatar import Avatar
+from gma.data.atomic import atomic_write_json
+from gma.train.checkpoint import load_checkpoint, save_checkpoint
+from gma.train.config import FitConfig, LossWeights
+from gma.train.data import FrameSet, load_frames
+from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
+from gma.train.metrics import psnr
+from gma.train.render_step import render_frame
+
+__all__ = ["Stage", "Trainer", "work_dir"]
+
+
+def work_dir(out: Path) -> Path:
+    """The folder holding a fit's config, checkpoint, metrics and previews: ``<out>.fit`` beside it."""
+    return out.with_name(out.stem + ".fit")
+
+
+@dataclass
+class Stage:
+    """One training stage: which layer renders, how long, with which weights, and which groups learn."""
+
+    name: str
+    layer: str  # "coarse" or "fine"
+    steps: int
+    weights: LossWeights
+    groups: tuple[str, ...]  # AvatarModel.param_groups names that learn
+
+
+def plan_stages(cfg: FitConfig) -> list[Stage]:
+    rep = cfg.avatar.representation
+    fine = "coarse" if rep == "mesh_only" else "fine"
+    if cfg.training == "one_stage":
+        w = LossWeights(**{**cfg.weights1.__dict__, "lpips": cfg.weights2.lpips})
+        return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"))]
+    return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex")),
+            Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"))]
+
+
+class Trainer:
+    """Fits an avatar to a sequence. ``run(resume)`` returns the fitted :class:`Avatar` (also saved)."""
+
+    def __init__(self, cfg: FitConfig, seq, out: str | Path, body=None, ctx=None, progress: bool = True):
+        from gma.body import load_body
+
+        self.cfg, self.seq, self.out = cfg, seq, Path(out)
+        self.dir = work_dir(self.out)
+        self.body = body or load_body(cfg.avatar.body)
+        self.ctx, self.progress = ctx, progress
+        if cfg.threads:
+            torch.set_num_threads(cfg.threads)
+        self.frames: FrameSet = load_frames(seq, self.body, "train", cfg.resolution, cfg.max_frames)
+        torch.manual_seed(cfg.seed)
+        self.avatar = Avatar.create(cfg.avatar, self.body, self.frames.shape, seed=cfg.seed)
+        self.model = self.avatar.model
+        self.frozen_decoders = False
+        if cfg.decoders:
+            shared = Avatar.load(cfg.decoders, self.body)
+            missing = self.model.load_state_dict(shared.model.decoder_state(), strict=False).missing_keys
+            if set(missing) - {"f_geo", "f_tex"}:
+                raise ValueError(f"{cfg.decoders}: decoders do not fit this config (missing {missing})")
+            self.frozen_decoders = True
+        self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
+        self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
+        need_lpips = any(s.weights.lpips > 0 for s in self.stages)
+        self.lpips = load_lpips(verbose=progress) if need_lpips else None
+        self.history: list[dict] = []
+        self.timing = {k: 0.0 for k in ("decode", "posing_render_fwd", "render_bwd", "torch_bwd",
+                                        "optimizer")}
+        self.timed_steps = 0
+
+    # -- optimisation set-up ---------------------------------------------------------------------------
+    def _optimizer(self, stage: Stage) -> torch.optim.Adam:
+        groups = self.model.param_groups()
+        learn = {id(p) for g in stage.groups for p in groups[g]}
+        feature_ids = {id(self.model.f_geo), id(self.model.f_tex)} if not self.model.direct else None
+        feats, decs = [], []
+        for p in self.model.parameters():
+            on = id(p) in learn
+            is_feature = feature_ids is None or id(p) in feature_ids
+            if self.frozen_decoders and not is_feature:
+                on = False
+            p.requires_grad_(on)
+            if on:
+                (feats if is_feature else decs).append(p)
+        param_groups = [{"params": feats, "lr": self.cfg.lr_features, "base_lr": self.cfg.lr_features}]
+        if decs:
+            param_groups.append({"params": decs, "lr": self.cfg.lr_decoders, "base_lr": self.cfg.lr_decoders})
+        return torch.optim.Adam(param_groups, eps=1e-15)
+
+    def _locate(self, step: int) -> tuple[int, int]:
+        """(stage index, step within the stage) of global ``step``."""
+        for i, s in enumerate(self.stages):
+            if step < s.steps:
+                return i, step
+            step -= s.steps
+        raise IndexError(step)
+
+    def _frame(self, step: int) -> int:
+        """Training frame of ``step``: a fresh seeded permutation per epoch, so resuming replays the order."""
+        n = len(self.frames)
+        epoch, k = divmod(step, n)
+        g = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + epoch)
+        return int(torch.randperm(n, generator=g)[k])
+
+    # -- one step --------------------------------------------------------------------------------------
+    def _loss(self, stage: Stage, t: int, timers: dict) -> tuple[torch.Tensor, dict, dict]:
+        w, cfg = stage.weights, self.cfg
+        t0 = time.perf_counter()
+        dec = self.model.decode(stage.layer)
+        t1 = time.perf_counter()
+        marks = {}
+        out, posed = render_frame(dec, self.body, self.frames, t, cfg.background, self.ctx, cfg.cull_backfaces,
+                                  on_means=lambda g: marks.setdefault("render_bwd_done", time.perf_counter()) and None)
+        t2 = time.perf_counter()
+        target = self.frames.target(t, cfg.background)
+        l1, dssim = picture_loss(out.color, target)
+        terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - self.frames.masks[t]).abs().mean()}
+        if w.lpips > 0 and self.lpips is not None:
+            terms["lpips"] = self.lpips(out.color, target)
+        offsets = dec.vertex_offsets
+        if w.lap > 0:
+            terms["lap"] = self.geo.laplacian(offsets)
+        if w.edge > 0:
+            terms["edge"] = self.geo.edge(self.frames.rest[t], offsets)
+        if w.normal > 0:
+            terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, self.frames.K[t])
+        loss = sum(getattr(w, k) * v for k, v in terms.items())
+        timers["decode"] += t1 - t0
+        timers["posing_render_fwd"] += t2 - t1
+        rec = {k: float(v.detach()) for k, v in terms.items()}
+        rec["psnr"] = psnr(out.color.detach(), target)
+        return loss, rec, marks
+
+    def _preview(self, step: int) -> None:
+        from gma.render.image_io import save_png
+
+        with torch.no_grad():
+            total = sum(s.steps for s in self.stages)
+            layer = self.stages[self._locate(min(step, total) - 1)[0]].layer if step > 0 else self.stages[0].layer
+            out, _ = render_frame(self.model.decode(layer), self.body, self.frames, 0, self.cfg.background,
+                                  self.ctx, cull=False)
+        img = torch.cat([out.color, self.frames.target(0, self.cfg.background)], 1).clamp(0, 1).numpy()
+        save_png(self.dir / "previews" / f"step_{step:06d}.png", img)
+
+    # -- the loop --------------------------------------------------------------------------------------
+    def run(self, resume: bool = False) -> Avatar:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        ckpt = self.dir / "checkpoint.safetensors"
+        cfg_json = self.cfg.to_dict()
+        total = sum(s.steps for s in self.stages)
+        step, elapsed = 0, 0.0
+        opt = None
+        if resume and ckpt.is_file():
+            saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
+            if saved and saved != cfg_json:
+                raise ValueError(f"{self.dir / 'config.json'}: the checkpoint was made with another config; "
+                                 "resume with the same options, or fit without --resume to start over")
+            opt, meta = load_checkpoint(ckpt, self.model, lambda m: self._optimizer(self.stages[m["stage"]]))
+            step, elapsed, self.history = meta["step"], meta["elapsed"], meta["history"]
+            self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
+            if self.progress:
+                print(f"[gma fit] resuming {ckpt} at step {step}/{total}")
+        elif resume and self.progress:
+            print(f"[gma fit] no checkpoint in {self.dir}; starting from step 0")
+        atomic_write_json(self.dir / "config.json", cfg_json)
+
+        bar = tqdm(total=total, initial=step, desc="fit", unit="step", disable=not self.progress, dynamic_ncols=True)
+        stage_idx = self._locate(step)[0] if step < total else len(self.stages) - 1
+        if opt is None and step < total:
+            opt = self._optimizer(self.stages[stage_idx])
+        t_start = time.perf_counter() - elapsed
+        while step < total:
+            si, local = self._locate(step)
+            stage = self.stages[si]
+            if si != stage_idx:
+                stage_idx, opt = si, self._optimizer(stage)
+            frac = local / max(1, stage.steps)
+            for g in opt.param_groups:
+                g["lr"] = g["base_lr"] * self.cfg.lr_decay**frac
+            loss, rec, marks = self._loss(stage, self._frame(step), self.timing)
+            tb = time.perf_counter()
+            loss.backward()
+            tc = time.perf_counter()
+            opt.step()
+            opt.zero_grad(set_to_none=True)
+            td = time.perf_counter()
+            rb = marks.get("render_bwd_done", tc)
+            self.timing["render_bwd"] += rb - tb
+            self.timing["torch_bwd"] += tc - rb
+            self.timing["optimizer"] += td - tc
+            self.timed_steps += 1
+            step += 1
+            if step % self.cfg.log_every == 0 or step == total:
+                self.history.append({"step": step, "stage": stage.name, "loss": float(loss), **rec})
+            bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss):.4f}", psnr=f"{rec['psnr']:.1f}")
+            bar.update(1)
+            stage_end = local + 1 == stage.steps
+            if step % self.cfg.checkpoint_every == 0 or stage_end:
+                meta = {"step": step, "stage": self._locate(step)[0] if step < total else si,
+                        "elapsed": time.perf_counter() - t_start, "history": self.history,
+                        "timing": self.timing, "timed_steps": self.timed_steps}
+                if meta["stage"] != si:  # the next stage starts with a fresh optimiser
+                    opt = self._optimizer(self.stages[meta["stage"]])
+                    stage_idx = meta["stage"]
+                save_checkpoint(ckpt, self.model, opt, meta)
+            if self.cfg.preview_every and step % self.cfg.preview_every == 0:
+                self._preview(step)
+        bar.close()
+        fit_seconds = time.perf_counter() - t_start
+        self._preview(total)
+        self.avatar.info = {"fit_seconds": round(fit_seconds, 1), "steps": total, "sequence": str(self.seq.root),
+                            "preset": self.cfg.preset, "training": self.cfg.training,
+                            "final_train_psnr": self.history[-1]["psnr"] if self.history else None}
+        self.avatar.save(self.out)
+        n = max(1, self.timed_steps)
+        metrics = {"fit_seconds": fit_seconds, "steps": total, "history": self.history,
+                   "ms_per_step": {k: 1000 * v / n for k, v in self.timing.items()},
+                   "avatar_bytes": self.out.stat().st_size, "lpips": self.lpips is not None,
+                   "train_frames": len(self.frames), "resolution": list(self.frames.images.shape[1:3])}
+        atomic_write_json(self.dir / "metrics.json", metrics)
+        return self.avatar
