@@ -38,7 +38,6 @@ class RadixSorter:
         """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside)."""
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
-        passes += passes % 2  # an even number of passes leaves the result in the caller's buffers
         hist = self.workspace.get("sort.hist", 16 * 4 * sort_blocks(capacity))
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
@@ -60,6 +59,10 @@ class RadixSorter:
             cp.dispatch_workgroups_indirect(info, 0)
             cp.end()
             src, dst = dst, src
+        if passes % 2:
+            # The result sits in the scratch pair: copy it back (cheaper than one more radix pass).
+            encoder.copy_buffer_to_buffer(keys_tmp, 0, keys, 0, 4 * capacity)
+            encoder.copy_buffer_to_buffer(vals_tmp, 0, values, 0, 4 * capacity)
 
     def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32):
         """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
