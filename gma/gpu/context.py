@@ -192,6 +192,8 @@ class GpuContext:
         for (buf, _, _), off, n in zip(items, offsets, sizes):
             if n:
                 enc.copy_buffer_to_buffer(buf, 0, staging, int(off), (n + 3) // 4 * 4)
+        # Wait for queued work first, so that the transfer timing counts the copy and not the compute.
+        self.device.queue.on_submitted_work_done_sync()
         with self.transfers.download(total):
             self.device.queue.submit([enc.finish()])
             staging.map_sync(wgpu.MapMode.READ)

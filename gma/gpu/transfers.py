@@ -9,7 +9,11 @@ from dataclasses import dataclass
 
 @dataclass
 class TransferStats:
-    """Running totals of host→GPU uploads and GPU→host downloads (bytes, seconds, calls)."""
+    """Running totals of host→GPU uploads and GPU→host downloads (bytes, seconds, calls).
+
+    Upload time is the time to hand data to the queue (the copy into the driver's staging memory).
+    Download time in ``GpuContext.read_many`` starts after queued compute has finished, so it is the copy
+    and map alone; ``GpuContext.read`` cannot separate the two and includes the wait."""
 
     bytes_up: int = 0
     bytes_down: int = 0
