@@ -88,7 +88,7 @@ class FitConfig:
 # Preset = overrides of the defaults. quick: fits within minutes on a 2-core CPU through lavapipe
 # (few, small renders; 2 fine surfels per face); full: the paper-like setting for a real GPU.
 PRESETS: dict[str, dict] = {
-    "quick": {"stage1_steps": 80, "stage2_steps": 160, "resolution": 128,
+    "quick": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 192, "preview_every": 200,
               "avatar": {"fine_per_face": 2, "feature_dim": 16}},
     "full": {"stage1_steps": 3000, "stage2_steps": 5000, "resolution": 512, "checkpoint_every": 500,
              "log_every": 50, "preview_every": 1000, "lr_decay": 0.05,

@@ -1,0 +1,40 @@
+"""Helpers of the fit benchmarks (benchmarks/fit_presets.py, ablations.py): get (or synthesise) a
+sequence, fit one variant, evaluate it."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+
+def sequence(path: str, seed: int = 0, size: int = 512):
+    from gma.data import read_sequence
+    from gma.data.synth.generate import SynthConfig, synthesize
+
+    p = Path(path)
+    if (p / "splits.json").is_file():
+        return read_sequence(p)
+    return synthesize(p, SynthConfig(seed=seed, width=size, height=size))
+
+
+def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: int | None = None,
+                 **overrides) -> dict:
+    """Fit ``preset_name`` with ``overrides`` into ``out``, evaluate test_pose and test_view; a dict row."""
+    from gma.train.config import preset
+    from gma.train.evaluate import evaluate
+    from gma.train.trainer import Trainer, work_dir
+
+    cfg = preset(preset_name, **overrides)
+    t0 = time.perf_counter()
+    avatar = Trainer(cfg, seq, out, body=body, ctx=ctx).run(resume=True)
+    fit_s = time.perf_counter() - t0
+    metrics = json.loads((work_dir(out) / "metrics.json").read_text())
+    row = {"fit_s": round(metrics["fit_seconds"], 1), "wall_s": round(fit_s, 1), "steps": metrics["steps"],
+           "avatar_mb": round(out.stat().st_size / 2**20, 2),
+           "ms_per_step": {k: round(v, 1) for k, v in metrics["ms_per_step"].items()}}
+    res = eval_resolution or cfg.resolution
+    for split in ("test_pose", "test_view"):
+        r = evaluate(avatar, seq, split, out.with_suffix(".eval"), res, cfg.background, body=body, ctx=ctx)
+        row[split] = {k: round(v, 4) for k, v in r["mean"].items()}
+    return row
