@@ -193,7 +193,7 @@ class GpuContext:
             if n:
                 enc.copy_buffer_to_buffer(buf, 0, staging, int(off), (n + 3) // 4 * 4)
         # Wait for queued work first, so that the transfer timing counts the copy and not the compute.
-        self.device.queue.on_submitted_work_done_sync()
+        self.wait_idle()
         with self.transfers.download(total):
             self.device.queue.submit([enc.finish()])
             staging.map_sync(wgpu.MapMode.READ)
@@ -201,6 +201,14 @@ class GpuContext:
             staging.unmap()
         staging.destroy()
         return [raw[off:off + n].view(np.dtype(dtype)) for (_, dtype, _), off, n in zip(items, offsets, sizes)]
+
+    def wait_idle(self) -> None:
+        """Block until all submitted work has finished. (A 4-byte read of a fence buffer: wgpu-py 0.32's
+        ``on_submitted_work_done_sync`` fails with a callback signature mismatch.)"""
+        fence = getattr(self, "_fence", None)
+        if fence is None:
+            fence = self._fence = self.device.create_buffer(label="fence", size=4, usage=STORAGE)
+        self.device.queue.read_buffer(fence, 0, 4)
 
     def submit(self, encoder: wgpu.GPUCommandEncoder) -> None:
         self.device.queue.submit([encoder.finish()])
