@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic constant
+REQUIRED = ("x", "y", "z", "rot_0", "rot_1", "rot_2", "rot_3", "opacity", "scale_0", "scale_1")
 
 _PLY_TYPES = {"float": "f4", "float32": "f4", "double": "f8", "float64": "f8", "uchar": "u1", "uint8": "u1",
               "char": "i1", "int8": "i1", "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
@@ -76,6 +77,9 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
     with path.open("rb") as fh:
         fmt, count, props = _read_header(fh, path)
         names = [p[0] for p in props]
+        missing = [r for r in REQUIRED if r not in names]
+        if missing:
+            raise ValueError(f"{path}: missing splat properties {missing}; expected the INRIA Gaussian layout")
         if fmt == "ascii":
             data = np.loadtxt(fh, dtype=np.float64, max_rows=count, ndmin=2)
             if data.shape != (count, len(props)):
@@ -89,10 +93,6 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
                 raise ValueError(f"{path}: file is truncated ({len(raw)} of {dtype.itemsize * count} vertex bytes)")
             arr = np.frombuffer(raw, dtype=dtype, count=count)
             columns = {n: arr[n] for n in names}
-    required = ["x", "y", "z", "rot_0", "rot_1", "rot_2", "rot_3", "opacity", "scale_0", "scale_1"]
-    missing = [r for r in required if r not in columns]
-    if missing:
-        raise ValueError(f"{path}: missing splat properties {missing}; expected the INRIA Gaussian layout")
 
     def col(*keys):
         return np.stack([np.asarray(columns[k], np.float64) for k in keys], 1)
