@@ -8,6 +8,7 @@ number of tile intersections so that the intersection buffers are sized exactly.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,9 +81,12 @@ class SurfelRasterizer:
         self.isect_capacity_hint = 1 << 16
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
-        # on GPUs those reads are broadcasts and the plain loop is simpler.
-        # The subgroup loops keep a ballot of one round in a single u32, hence at most 32 lanes.
-        self.use_subgroups = ctx.has_subgroups and ctx.is_software and 1 <= ctx.subgroup_size <= 32
+        # on GPUs those reads are broadcasts and the plain loop is simpler. The subgroup variant is only
+        # validated on lavapipe so far: GMA_RASTER_SUBGROUPS=1 turns it on elsewhere, =0 off. Its loops
+        # keep one round's ballot in a single u32, hence at most 32 lanes.
+        wanted = os.environ.get("GMA_RASTER_SUBGROUPS", "auto").strip().lower()
+        capable = ctx.has_subgroups and 1 <= ctx.subgroup_size <= 32
+        self.use_subgroups = capable and (ctx.is_software if wanted == "auto" else wanted in ("1", "true", "on"))
         self.last_timings: dict[str, float] = {}
 
     # -- variants -----------------------------------------------------------------------------------
