@@ -162,7 +162,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 batch_color[lid * CHUNKS + c] = v;
             }
 #if USE_SUBGROUPS
-            batch_bounds[lid] = pixel_bounds[sid];
+            batch_blocks[lid] = block_mask(pixel_bounds[sid], tile_origin(tile));
 #endif
         }
         workgroupBarrier();
@@ -170,8 +170,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #if USE_SUBGROUPS
         // Uniform over the subgroup: surfels pass between lanes by shuffles (see rasterize_core.wgsl)
         // and each surfel's gradient is summed over the subgroup before one atomic add per value.
-        let block_lo = subgroupMin(px);
-        let block_hi = subgroupMax(px);
+        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
         let block_last = subgroupMax(last);
         for (var jj = 0u; jj < m; jj += SG) {
             let j0 = m - min(m, jj + SG);          // this round covers local slots [j0, m - jj)
@@ -180,9 +179,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             let n = m - jj - j0;
             let slot = min(j0 + sg_lane, m - 1u);
-            let mine_bounds = batch_bounds[slot];
-            let hit = sg_lane < n && start + j0 + sg_lane < block_last && all(block_hi >= mine_bounds.xy)
-                      && all(block_lo <= mine_bounds.zw);
+            let hit = sg_lane < n && start + j0 + sg_lane < block_last && (batch_blocks[slot] & my_blocks) != 0u;
             var hits = subgroupBallot(hit).x;
             if hits == 0u {
                 continue;

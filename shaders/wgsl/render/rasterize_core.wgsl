@@ -13,7 +13,8 @@
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
 @group(0) @binding(14) var<storage, read> pixel_bounds: array<vec4<f32>>;     // [N] lo.xy, hi.xy
-var<workgroup> batch_bounds: array<vec4<f32>, BATCH>;
+// Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
+var<workgroup> batch_blocks: array<u32, BATCH>;
 #endif
 
 var<workgroup> batch_surf: array<ProjectedSurfel, BATCH>;
@@ -66,10 +67,36 @@ fn blend(s: ProjectedSurfel, px: vec2<f32>, slot: u32, index: u32, result: ptr<f
     return true;
 }
 
+// Bit of the 4x2 pixel block holding tile-local pixel `p` (4 block columns, 8 block rows).
+fn block_bit(p: vec2<u32>) -> u32 {
+    return 1u << ((p.y >> 1u) * 4u + (p.x >> 2u));
+}
+
+// Blocks of the tile at `origin` (pixels) that pixel-centre bounds `b` (lo.xy, hi.xy) reach.
+fn block_mask(b: vec4<f32>, origin: vec2<f32>) -> u32 {
+    let lo = ceil(b.xy - 0.5) - origin;
+    let hi = floor(b.zw - 0.5) - origin;
+    if any(hi < lo) || any(hi < vec2<f32>(0.0)) || any(lo > vec2<f32>(f32(TILE_SIZE - 1u))) {
+        return 0u;
+    }
+    let l = vec2<u32>(max(lo, vec2<f32>(0.0)));
+    let h = vec2<u32>(min(hi, vec2<f32>(f32(TILE_SIZE - 1u))));
+    let cols = ((2u << (h.x >> 2u)) - 1u) & ~((1u << (l.x >> 2u)) - 1u);   // 4-bit column set
+    var mask = 0u;
+    for (var r = l.y >> 1u; r <= (h.y >> 1u); r++) {
+        mask |= cols << (4u * r);
+    }
+    return mask;
+}
+
 // Pixel of thread `lid` in its tile. Consecutive threads (a subgroup) cover 4x2 blocks rather than
 // rows, so that small surfels miss whole subgroups more often.
 fn tile_pixel(lid: u32) -> vec2<u32> {
     return vec2<u32>((lid & 3u) | ((lid >> 1u) & 12u), ((lid >> 2u) & 1u) | ((lid >> 4u) & 14u));
+}
+
+fn tile_origin(tile: u32) -> vec2<f32> {
+    return vec2<f32>(f32((tile % params.tile_grid.x) * TILE_SIZE), f32((tile / params.tile_grid.x) * TILE_SIZE));
 }
 
 fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32) -> PixelResult {
@@ -95,7 +122,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
             let sid = isect_ids[base + lid];
             batch_surf[lid] = projected[sid];
 #if USE_SUBGROUPS
-            batch_bounds[lid] = pixel_bounds[sid];
+            batch_blocks[lid] = block_mask(pixel_bounds[sid], tile_origin(tile));
 #endif
             for (var c = 0u; c < CHUNKS; c++) {
                 var v = vec4<f32>(0.0);
@@ -120,10 +147,9 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         var acc_color = vec4<f32>(0.0);
         var acc_nd = vec4<f32>(0.0);
         var last = 0u;
-        // The subgroup's pixels form a small block (see tile_pixel); a surfel whose screen bounds miss
-        // the block is skipped by the whole subgroup at once.
-        let block_lo = subgroupMin(px);
-        let block_hi = subgroupMax(px);
+        // The subgroup's pixels form 4x2 blocks (see tile_pixel); a surfel whose screen bounds miss
+        // them is skipped by the whole subgroup at once.
+        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
         for (var j = 0u; j < m; j += SG) {
             if subgroupAll(done) {
                 break;
@@ -131,8 +157,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
             // Which of the next SG surfels can touch this subgroup's pixel block? Only their data is
             // read and shuffled; most steps touch none, as surfels are small next to a tile.
             let slot = min(j + sg_lane, m - 1u);
-            let mine_bounds = batch_bounds[slot];
-            let hit = j + sg_lane < m && all(block_hi >= mine_bounds.xy) && all(block_lo <= mine_bounds.zw);
+            let hit = j + sg_lane < m && (batch_blocks[slot] & my_blocks) != 0u;
             var hits = subgroupBallot(hit).x;
             if hits == 0u {
                 continue;
