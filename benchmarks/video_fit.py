@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # run from a checkout without installing
 IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
 JOINTS = ["coco:left_shoulder", "coco:right_shoulder", "coco:left_elbow", "coco:right_elbow", "coco:left_wrist",
           "coco:right_wrist", "coco:left_hip", "coco:right_hip", "coco:left_knee", "coco:right_knee",

@@ -191,3 +191,21 @@ def test_no_person_is_a_clear_error(tmp_path):
     iio.imwrite(clip, frames, fps=5, codec="libx264", macro_block_size=16)
     with pytest.raises(ValueError, match="no person detected"):
         estimate_sequence(clip, tmp_path / "seq", progress=False)
+
+
+IPER = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data" / "iper_turn_512.gif"
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not IPER.is_file(), reason=f"{IPER} not present (real footage is never copied into the repo)")
+def test_pipeline_on_real_footage(tmp_path, anny_body):
+    """iPER: a man turning once in A-pose. Every 6th frame, a short fit: the person is found in every
+    frame and the fitted body covers the mask reasonably."""
+    pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
+    from gma.video import FitConfig, VideoImportConfig, estimate_sequence
+
+    cfg = VideoImportConfig(skip=6, fit=FitConfig(iters_root=30, iters_pose=100, iters_shape=0))
+    seq, report = estimate_sequence(IPER, tmp_path / "seq", config=cfg, progress=False, anny=anny_body)
+    assert len(seq) == 9 and report["detection_rate"] == 1.0
+    assert report["mask_iou_mean"] > 0.5
+    assert report["reprojection_error_px_mean"] < 25.0

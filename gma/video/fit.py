@@ -216,8 +216,12 @@ def fit_body(rig: AnnyRig, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray, ma
         total = sum(terms.values())
         return total, {k: float(v.detach()) for k, v in terms.items()}
 
-    stages = [(1, cfg.iters_root, [rotvecs, transl]), (2, cfg.iters_pose, [rotvecs, transl]),
-              (3, cfg.iters_shape, [rotvecs, transl] + ([pheno_logit] if cfg.fit_shape else []))]
+    # Stage 3 sees the silhouette of only a few frames per step; at the full step size Adam would
+    # jolt exactly those frames' poses each time, so poses move 5× slower there than the phenotype.
+    poses = [{"params": [rotvecs, transl]}]
+    stages = [(1, cfg.iters_root, poses), (2, cfg.iters_pose, poses),
+              (3, cfg.iters_shape, [{"params": [rotvecs, transl], "lr": cfg.lr * 0.2}]
+               + ([{"params": [pheno_logit]}] if cfg.fit_shape else []))]
     bar = tqdm(total=sum(s[1] for s in stages), desc="fit", unit="step", leave=False, disable=not progress)
     for stage, iters, params in stages:
         if iters <= 0:
