@@ -210,8 +210,8 @@ class Trainer:
             self.timed_steps += 1
             step += 1
             if step % self.cfg.log_every == 0 or step == total:
-                self.history.append({"step": step, "stage": stage.name, "loss": float(loss), **rec})
-            bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss):.4f}", psnr=f"{rec['psnr']:.1f}")
+                self.history.append({"step": step, "stage": stage.name, "loss": float(loss.detach()), **rec})
+            bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss.detach()):.4f}", psnr=f"{rec['psnr']:.1f}")
             bar.update(1)
             stage_end = local + 1 == stage.steps
             if step % self.cfg.checkpoint_every == 0 or stage_end:
