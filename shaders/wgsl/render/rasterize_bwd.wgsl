@@ -151,19 +151,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         if lid < BATCH && start + lid < count {
             let sid = isect_ids[range.x + start + lid];
             batch_ids[lid] = sid;
-            batch_surf[lid] = projected[sid];
-            for (var c = 0u; c < CHUNKS; c++) {
-                var v = vec4<f32>(0.0);
-                for (var e = 0u; e < 4u; e++) {
-                    if 4u * c + e < CHANNELS {
-                        v[e] = colors[sid * CHANNELS + 4u * c + e];
-                    }
-                }
-                batch_color[lid * CHUNKS + c] = v;
-            }
-#if USE_SUBGROUPS
-            batch_blocks[lid] = block_mask(pixel_bounds[sid], tile_origin(tile));
-#endif
+            stage_surfel(lid, sid, tile);
         }
         workgroupBarrier();
         let m = min(BATCH, count - start);

@@ -99,6 +99,23 @@ fn tile_origin(tile: u32) -> vec2<f32> {
     return vec2<f32>(f32((tile % params.tile_grid.x) * TILE_SIZE), f32((tile / params.tile_grid.x) * TILE_SIZE));
 }
 
+// Copy surfel `sid` into batch slot `slot` (colours padded to vec4 chunks, block mask when needed).
+fn stage_surfel(slot: u32, sid: u32, tile: u32) {
+    batch_surf[slot] = projected[sid];
+#if USE_SUBGROUPS
+    batch_blocks[slot] = block_mask(pixel_bounds[sid], tile_origin(tile));
+#endif
+    for (var c = 0u; c < CHUNKS; c++) {
+        var v = vec4<f32>(0.0);
+        for (var e = 0u; e < 4u; e++) {
+            if 4u * c + e < CHANNELS {
+                v[e] = colors[sid * CHANNELS + 4u * c + e];
+            }
+        }
+        batch_color[slot * CHUNKS + c] = v;
+    }
+}
+
 fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32) -> PixelResult {
     var result: PixelResult;
     var T = 1.0;
@@ -119,20 +136,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         }
         let base = range.x + b * BATCH;
         if lid < BATCH && base + lid < range.y {
-            let sid = isect_ids[base + lid];
-            batch_surf[lid] = projected[sid];
-#if USE_SUBGROUPS
-            batch_blocks[lid] = block_mask(pixel_bounds[sid], tile_origin(tile));
-#endif
-            for (var c = 0u; c < CHUNKS; c++) {
-                var v = vec4<f32>(0.0);
-                for (var e = 0u; e < 4u; e++) {
-                    if 4u * c + e < CHANNELS {
-                        v[e] = colors[sid * CHANNELS + 4u * c + e];
-                    }
-                }
-                batch_color[lid * CHUNKS + c] = v;
-            }
+            stage_surfel(lid, isect_ids[base + lid], tile);
         }
         workgroupBarrier();
         let was_done = done;

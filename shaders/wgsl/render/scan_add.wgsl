@@ -1,12 +1,6 @@
 // Exclusive prefix sum, down pass: adds each block's scanned offset to its elements.
-const SCAN_BLOCK: u32 = 1024u;
+#include "common/scan_types.wgsl"
 
-struct ScanParams {
-    count: u32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
-};
 
 @group(0) @binding(0) var<uniform> scan: ScanParams;
 @group(0) @binding(1) var<storage, read> block_offsets: array<u32>;

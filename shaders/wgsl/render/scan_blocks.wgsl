@@ -1,18 +1,12 @@
 // Exclusive prefix sum, level pass: each workgroup scans SCAN_BLOCK values and writes its block total.
 // With GATHER (a define) the values are read as values[index[i]], which scans the tile counts in depth
 // order without materialising them.
+#include "common/scan_types.wgsl"
 #include "common/math.wgsl"
 
 const SCAN_WG: u32 = 256u;
 const SCAN_ITEMS: u32 = 4u;
-const SCAN_BLOCK: u32 = 1024u;
 
-struct ScanParams {
-    count: u32,
-    _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
-};
 
 @group(0) @binding(0) var<uniform> scan: ScanParams;
 @group(0) @binding(1) var<storage, read> values: array<u32>;
