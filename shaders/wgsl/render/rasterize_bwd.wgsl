@@ -202,9 +202,22 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 acc_nd += w * s.normal_depth;
                 T = select(T, T_i, contrib);
                 if subgroupAny(contrib) {
-                    let r = SurfelGrad(subgroupAdd(g.v_t0), subgroupAdd(g.v_t1), subgroupAdd(g.v_t2),
-                                       subgroupAdd(g.v_mu2d), subgroupAdd(g.v_opacity), subgroupAdd(g.v_nd));
-                    let rc = subgroupAdd(g_col);
+                    // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
+                    // log2(SG) xor-shuffles of packed vec4s.
+                    var a = vec4<f32>(g.v_t0, g.v_opacity);
+                    var b = vec4<f32>(g.v_t1, g.v_mu2d.x);
+                    var c = vec4<f32>(g.v_t2, g.v_mu2d.y);
+                    var d = g.v_nd;
+                    var e = g_col;
+                    for (var off = SG / 2u; off > 0u; off >>= 1u) {
+                        a += subgroupShuffleXor(a, off);
+                        b += subgroupShuffleXor(b, off);
+                        c += subgroupShuffleXor(c, off);
+                        d += subgroupShuffleXor(d, off);
+                        e += subgroupShuffleXor(e, off);
+                    }
+                    let r = SurfelGrad(a.xyz, b.xyz, c.xyz, vec2<f32>(b.w, c.w), a.w, d);
+                    let rc = e;
                     if sg_lane == 0u {  // every lane is active here: the skips above are subgroup-uniform
                         flush(sid, r);
                         for (var c = 0u; c < CHANNELS; c++) {
