@@ -247,6 +247,7 @@ class SurfelRasterizer:
         v_colors = ctx.buffer(4 * c * n, "v_colors")
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
+        defines["NORMAL_DEPTH_GRADS"] = v_normal is not None or v_depth is not None
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,

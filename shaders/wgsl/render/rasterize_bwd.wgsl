@@ -2,7 +2,9 @@
 // compositing back to front, starting from its final transmittance and last contributor, recovering
 // T before each surfel as T_after / (1 - alpha). Per surfel it produces the gradients of the pixel's
 // outputs with respect to the ray transform T, the projected centre, opacity, colour, normal and depth.
-// Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG); the subgroup variant needs CHANNELS <= 4.
+// Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG; that variant needs CHANNELS <= 4), and
+// NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
+// are then zero and neither summed nor scattered; the buffer entries stay zero).
 #include "render/rasterize_core.wgsl"
 #include "render/grad_atomics.wgsl"
 
@@ -73,10 +75,12 @@ fn flush(sid: u32, g: SurfelGrad) {
     add_proj(b + G_MU2D, g.v_mu2d.x);
     add_proj(b + G_MU2D + 1u, g.v_mu2d.y);
     add_proj(b + G_OPACITY, g.v_opacity);
+#if NORMAL_DEPTH_GRADS
     add_proj(b + G_NORMAL, g.v_nd.x);
     add_proj(b + G_NORMAL + 1u, g.v_nd.y);
     add_proj(b + G_NORMAL + 2u, g.v_nd.z);
     add_proj(b + G_DEPTH, g.v_nd.w);
+#endif
 }
 
 var<workgroup> batch_ids: array<u32, BATCH>;
@@ -213,7 +217,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                         a += subgroupShuffleXor(a, off);
                         b += subgroupShuffleXor(b, off);
                         c += subgroupShuffleXor(c, off);
+#if NORMAL_DEPTH_GRADS
                         d += subgroupShuffleXor(d, off);
+#endif
                         e += subgroupShuffleXor(e, off);
                     }
                     let r = SurfelGrad(a.xyz, b.xyz, c.xyz, vec2<f32>(b.w, c.w), a.w, d);
