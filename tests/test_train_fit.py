@@ -77,6 +77,8 @@ def test_two_stages_freeze(seq, anny_body, gpu, tmp_path):
     d = work_dir(tmp_path / "a.gma")
     metrics = json.loads((d / "metrics.json").read_text())
     assert metrics["steps"] == 4 and len(metrics["history"]) == 4
+    # The fine surfels' normal offsets are pulled toward the morphed mesh in the fine stage only.
+    assert [("offset" in h) for h in metrics["history"]] == [False, False, True, True]
     assert set(metrics["ms_per_step"]) >= {"decode", "render_bwd", "optimizer"}
     assert json.loads((d / "config.json").read_text())["stage1_steps"] == 2
     assert list((d / "previews").glob("*.png"))

@@ -25,6 +25,10 @@ class LossWeights:
     lap: float = doc(1000.0, "Laplacian of the mesh-layer displacement (mean squared norm)")
     edge: float = doc(100.0, "relative edge-length change, morphed vs body mesh (mean squared)")
     normal: float = doc(0.05, "2DGS normal consistency: rendered normals vs normals of the rendered depth")
+    offset: float = doc(0.01, "mean (d / fine_offset_max)^2 of the fine surfels' normal offsets (fine layer "
+                              "only): keeps surfels on the morphed mesh. Without it Adam, which normalises a "
+                              "tiny but biased gradient, drove d to -1 cm on most surfels: the skin sank "
+                              "below the inner eye/mouth cavities, which then showed through the face")
 
 
 def _stage2_weights() -> LossWeights:

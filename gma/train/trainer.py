@@ -141,6 +141,8 @@ class Trainer:
             terms["lap"] = self.geo.laplacian(offsets)
         if w.edge > 0:
             terms["edge"] = self.geo.edge(self.frames.rest[t], offsets)
+        if w.offset > 0 and stage.layer == "fine":
+            terms["offset"] = (dec.binding.offset / self.model.config.fine_offset_max).pow(2).mean()
         if w.normal > 0:
             terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, self.frames.K[t])
         loss = sum(getattr(w, k) * v for k, v in terms.items())
