@@ -71,3 +71,21 @@ def test_context_reports_features(gpu):
     assert isinstance(gpu.has_float_atomics, bool)
     if gpu.has_subgroups:
         assert gpu.subgroup_size in (4, 8, 16, 32, 64, 128)
+
+
+@pytest.mark.gpu
+def test_oversized_storage_buffer_is_a_clear_error(gpu):
+    with pytest.raises(MemoryError, match="'too_big'.*storage binding limit"):
+        gpu.buffer(gpu.max_binding_bytes + 4, "too_big")
+
+
+@pytest.mark.gpu
+def test_workspace_reuses_and_grows(gpu):
+    from gma.gpu.workspace import Workspace
+
+    ws = Workspace(gpu)
+    a = ws.get("scratch", 100)
+    assert ws.get("scratch", 64) is a, "a smaller request reuses the buffer"
+    b = ws.get("scratch", 1000)
+    assert b is not a and b.size >= 1000
+    assert ws.nbytes == b.size
