@@ -119,9 +119,7 @@ class AvatarModel(nn.Module):
             self.f_geo = nn.Parameter(0.1 * torch.randn(nf, k, generator=g))
             self.f_tex = nn.Parameter(0.1 * torch.randn(nf, k, generator=g))
             torch.manual_seed(seed)  # decoder init follows the avatar seed, not the caller's RNG state
-            # Zero output layer: the mesh layer starts exactly on the body. With the default small gain the
-            # random f_geo gave every vertex a noisy ~0.5 mm offset, which the edge loss then had to undo.
-            self.F_coarse = Mlp(k + p, c.hidden, 3, "gelu", out_gain=0.0)
+            self.F_coarse = Mlp(k + p, c.hidden, 3, "gelu")
             self.F_fine = Mlp(k + p, c.hidden, 4 * nk, "gelu")
             self.T_color = Mlp(k + p, c.hidden, 3 * nk, "relu", out_gain=1.0)  # colours must move fast
             self.T_scale = Mlp(k + p, c.hidden, 2 * nk, "relu")
