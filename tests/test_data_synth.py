@@ -121,7 +121,7 @@ def test_bad_config(tmp_path, gpu, anny):
 
 
 def test_cli_size_parser():
-    from gma.commands.synth import _size
+    from gma.commands import parse_image_size as _size
 
     assert _size("512") == (512, 512) and _size("640x480") == (640, 480)
     with pytest.raises(Exception, match="N or WxH"):

@@ -101,7 +101,7 @@ def test_render_ply_command(gpu, tmp_path, capsys):
     assert iio.imread(tmp_path / "depth.png").shape == (32, 48)
     # Automatic framing when no camera is given.
     assert gma_main(["render-ply", str(tmp_path / "s.ply"), "-o", str(tmp_path / "auto.png"),
-                     "--size", "40", "30"]) == 0
+                     "--size", "40x30"]) == 0
     assert iio.imread(tmp_path / "auto.png").shape == (30, 40, 3)
     # A bad camera file is one clear line, not a traceback.
     (tmp_path / "bad.json").write_text("{")

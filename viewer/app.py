@@ -6,6 +6,8 @@ import argparse
 import os
 import sys
 
+from gma.commands import parse_image_size
+
 __all__ = ["add_arguments", "main", "run"]
 
 
@@ -13,22 +15,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", nargs="?", default="body:anny",
                    help="a fitted avatar .gma, a splat .ply, or body:anny / body:smplx (placeholder surfels)")
     p.add_argument("--surfels", type=int, default=50_000, help="placeholder surfels for body:* sources")
-    p.add_argument("--size", default="800x600", help="window size WxH")
+    p.add_argument("--size", type=parse_image_size, default=(800, 600), help="window size, N or WxH")
     p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
     p.add_argument("--sequence", default=None, help="sequence folder: its cameras become presets, its poses a motion")
     p.add_argument("--no-panels", action="store_true", help="no Dear ImGui panels (mouse and keys only)")
     p.add_argument("--frames", type=int, default=0, help="draw this many frames and exit (0: until closed)")
     p.add_argument("--screenshot", default=None, help="with --frames: save the last frame as PNG")
 
-
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"size must look like 800x600, got {text!r}") from None
-    if w < 1 or h < 1:
-        raise ValueError(f"size must be positive, got {text!r}")
-    return w, h
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
-    width, height = parse_size(args.size)
+    width, height = args.size
     ctx = get_context()
     source = load_source(ctx, args.source, args.surfels)
     presets = sequence_cameras(args.sequence) if args.sequence else []

@@ -11,12 +11,14 @@ from __future__ import annotations
 import argparse
 import sys
 
+from gma.commands import parse_image_size
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("render", help="render an avatar, splat PLY or the body offscreen to MP4/GIF/PNGs")
     p.add_argument("source", help="a fitted avatar .gma, a splat .ply, or body:anny / body:smplx")
     p.add_argument("-o", "--out", required=True, help="output: .mp4, .gif, or a directory for PNG frames")
-    p.add_argument("--size", default="640x480", help="image size WxH")
+    p.add_argument("--size", type=parse_image_size, default=(640, 480), help="image size, N or WxH (default 640x480)")
     p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
     p.add_argument("--orbit", type=float, default=1.0, help="turns of the camera around the subject")
     p.add_argument("--elevation", type=float, default=10.0, help="camera elevation in degrees")
@@ -34,9 +36,8 @@ def run(args: argparse.Namespace) -> int:
     from gma.view.record import Recorder, output_kind
     from gma.view.renderer import FrameRenderer
     from gma.view.source import load_source
-    from viewer.app import parse_size
 
-    width, height = parse_size(args.size)
+    width, height = args.size
     output_kind(args.out)  # fail on a bad suffix before loading anything
     try:
         background = tuple(float(v) for v in args.background.split(","))

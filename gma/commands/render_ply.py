@@ -6,6 +6,8 @@ import argparse
 
 import numpy as np
 
+from gma.commands import parse_image_size
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("render-ply", help="render a Gaussian-splat PLY (INRIA layout) to a PNG",
@@ -15,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--camera", help="camera JSON {width, height, K (3x3), w2c (4x4)}; default: an automatic "
                                     "view that frames the whole scene")
     p.add_argument("-o", "--output", required=True, help="output PNG")
-    p.add_argument("--size", type=int, nargs=2, default=(800, 800), metavar=("W", "H"),
+    p.add_argument("--size", type=parse_image_size, default=(800, 800),
                    help="image size for the automatic camera")
     p.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"))
     p.add_argument("--depth", help="also write a normalised depth PNG here")

@@ -4,15 +4,8 @@ cameras, body parameters, the textured mesh), for tests, the demo and measuring 
 from __future__ import annotations
 
 import argparse
-import re
 
-
-def _size(text: str) -> tuple[int, int]:
-    m = re.fullmatch(r"(\d+)(?:x(\d+))?", text.strip())
-    if not m:
-        raise argparse.ArgumentTypeError(f"size must be N or WxH, got {text!r}")
-    w = int(m.group(1))
-    return w, int(m.group(2) or w)
+from gma.commands import parse_image_size
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -56,7 +49,7 @@ def register(subparsers) -> None:
         help="turn: slow A-pose turn before a static camera (PeopleSnapshot-like); "
         "motion: varied motion (X-Humans-like)",
     )
-    p.add_argument("--size", type=_size, default=(512, 512), help="image size, N or WxH (default 512)")
+    p.add_argument("--size", type=parse_image_size, default=(512, 512), help="image size, N or WxH (default 512)")
     p.add_argument("--frames", type=int, default=60, help="training frames")
     p.add_argument("--test-pose-frames", type=int, default=10, help="held-out novel-pose frames")
     p.add_argument("--test-view-frames", type=int, default=10, help="held-out novel-view frames")
