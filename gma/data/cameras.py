@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from gma.data.atomic import atomic_write_json
+from gma.render.camera import look_at_w2c as look_at  # one camera convention for the project
 
 __all__ = ["Cameras", "load_cameras", "save_cameras", "look_at"]
 
@@ -114,17 +115,3 @@ def save_cameras(path: str | os.PathLike, cams: Cameras) -> None:
     atomic_write_json(path, cams.to_json())
 
 
-def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
-    """OpenCV world→camera 4×4 for a camera at ``eye`` looking at ``target`` with world ``up`` pointing
-    up in the image (camera y points down, so it is −up projected)."""
-    eye, target, up = (np.asarray(v, np.float64) for v in (eye, target, up))
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)  # right = forward × up in a y-down camera frame
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    r = np.stack([x, y, z])
-    w2c = np.eye(4)
-    w2c[:3, :3] = r
-    w2c[:3, 3] = -r @ eye
-    return w2c

@@ -10,6 +10,24 @@ from pathlib import Path
 import numpy as np
 
 
+def look_at_w2c(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """OpenCV world->camera 4x4 (float64) for a camera at ``eye`` looking at ``target``, with world ``up``
+    shown upwards in the image (the camera's y axis points down, so it is -up projected)."""
+    eye = np.asarray(eye, np.float64)
+    forward = np.asarray(target, np.float64) - eye
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, np.float64))
+    if np.linalg.norm(right) < 1e-8:
+        raise ValueError("look_at: 'up' is parallel to the viewing direction")
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
+    view = np.eye(4)
+    view[:3, :3] = R
+    view[:3, 3] = -R @ eye
+    return view
+
+
 @dataclass(frozen=True)
 class Camera:
     """``viewmat`` [4, 4] world->camera, ``K`` [3, 3] intrinsics in pixels, image ``width`` x ``height``."""
@@ -26,19 +44,7 @@ class Camera:
 
         OpenCV's y axis points down in the image, so the camera's y axis is ``-up`` projected.
         """
-        eye = np.asarray(eye, np.float64)
-        forward = np.asarray(target, np.float64) - eye
-        forward /= np.linalg.norm(forward)
-        down = -np.asarray(up, np.float64)
-        right = np.cross(down, forward)
-        if np.linalg.norm(right) < 1e-8:
-            raise ValueError("look_at: 'up' is parallel to the viewing direction")
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
-        view = np.eye(4)
-        view[:3, :3] = R
-        view[:3, 3] = -R @ eye
+        view = look_at_w2c(eye, target, up)
         f = 0.5 * height / math.tan(math.radians(fov_y_deg) / 2)
         K = np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]])
         return Camera(view.astype(np.float32), K.astype(np.float32), int(width), int(height))
