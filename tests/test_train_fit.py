@@ -17,13 +17,23 @@ TINY = dict(resolution=48, checkpoint_every=1, log_every=1, preview_every=0, sta
             avatar={"feature_dim": 8, "fine_per_face": 1})
 
 
-@pytest.fixture(scope="module")
-def seq(tmp_path_factory, gpu, anny_body):
+def _tiny_sequence(folder, seed, gpu, anny_body):
     from gma.data.synth.generate import SynthConfig, synthesize
 
     cfg = SynthConfig(width=64, height=64, train_frames=4, test_pose_frames=2, test_view_frames=1,
-                      supersample=1, texture_size=256)
-    return synthesize(tmp_path_factory.mktemp("seq") / "s", cfg, ctx=gpu, body=anny_body, progress=False)
+                      supersample=1, texture_size=256, seed=seed)
+    return synthesize(folder, cfg, ctx=gpu, body=anny_body, progress=False)
+
+
+@pytest.fixture(scope="module")
+def seq(tmp_path_factory, gpu, anny_body):
+    return _tiny_sequence(tmp_path_factory.mktemp("seq") / "s", 0, gpu, anny_body)
+
+
+@pytest.fixture(scope="module")
+def other_seq(tmp_path_factory, gpu, anny_body):
+    """A second person (another seed: other clothes, texture and identity)."""
+    return _tiny_sequence(tmp_path_factory.mktemp("seq2") / "t", 1, gpu, anny_body)
 
 
 def _fit(seq, out, anny_body, gpu, resume=False, **kw):
@@ -127,6 +137,55 @@ def test_shared_decoders_frozen(seq, anny_body, gpu, tmp_path):
     av = _fit(seq, tmp_path / "feat.gma", anny_body, gpu, decoders=str(tmp_path / "shared.gma"), seed=5)
     for k, v in shared.model.decoder_state().items():
         assert torch.equal(v, av.model.decoder_state()[k]), k
+
+
+def test_decoders_trained_over_several_sequences(seq, other_seq, anny_body, gpu, tmp_path):
+    from gma.avatar.decoders import load_decoders
+
+    tr = Trainer(preset("quick", **TINY), [seq, other_seq], tmp_path / "shared", body=anny_body, ctx=gpu,
+                 progress=False)
+    init = {k: v.clone() for k, v in tr.model.decoder_state().items()}
+    tr.run()
+    a, b = Avatar.load(tmp_path / "shared" / "s.gma", anny_body), Avatar.load(tmp_path / "shared" / "t.gma", anny_body)
+    dec = load_decoders(tmp_path / "shared" / "decoders.gma", a.config)
+    # One set of decoders, trained (it moved), written identically into both avatars and the decoders file.
+    assert set(dec) == set(init) and any(not torch.equal(init[k], dec[k]) for k in dec)
+    for k, v in dec.items():
+        assert torch.equal(v, a.model.decoder_state()[k]) and torch.equal(v, b.model.decoder_state()[k]), k
+    # Each person has its own features and body identity.
+    assert not torch.equal(a.model.f_tex, b.model.f_tex) and not torch.equal(a.shape, b.shape)
+    assert a.info["decoders_shared_with"] == ["s", "t"] and a.info["sequence"] == str(seq.root)
+    # Steps take the sequences in turn.
+    history = json.loads((work_dir(tmp_path / "shared") / "metrics.json").read_text())["history"]
+    assert [h["subject"] for h in history] == [0, 1, 0, 1]
+    # The checkpoint stores the shared decoders once and restores them into every avatar.
+    again = Trainer(preset("quick", **TINY), [seq, other_seq], tmp_path / "shared", body=anny_body, ctx=gpu,
+                    progress=False)
+    again.run(resume=True)
+    assert again.models[1].F_fine is again.models[0].F_fine
+    assert torch.equal(again.models[1].f_tex, b.model.f_tex) and torch.equal(again.models[1].T_color[2].weight,
+                                                                           b.model.T_color[2].weight)
+    # A new fit of features only against them keeps them exactly.
+    new = _fit(seq, tmp_path / "new.gma", anny_body, gpu, decoders=str(tmp_path / "shared" / "decoders.gma"))
+    for k, v in dec.items():
+        assert torch.equal(v, new.model.decoder_state()[k]), k
+
+
+def test_decoders_errors(seq, other_seq, anny_body, gpu, tmp_path):
+    from gma.avatar import AvatarFileError
+
+    with pytest.raises(ValueError, match="names a folder"):
+        Trainer(preset("quick", **TINY), [seq, other_seq], tmp_path / "x.gma", body=anny_body, ctx=gpu,
+                progress=False)
+    _fit(seq, tmp_path / "a.gma", anny_body, gpu)
+    wider = {**TINY["avatar"], "feature_dim": 12}
+    with pytest.raises(AvatarFileError, match=r"a\.gma.*feature_dim 8 vs 12"):
+        _fit(seq, tmp_path / "b.gma", anny_body, gpu, decoders=str(tmp_path / "a.gma"), avatar=wider)
+    (tmp_path / "junk.gma").write_bytes(b"not safetensors")
+    with pytest.raises(AvatarFileError, match="junk.gma"):
+        _fit(seq, tmp_path / "c.gma", anny_body, gpu, decoders=str(tmp_path / "junk.gma"))
+    with pytest.raises(FileNotFoundError, match="nothere.gma"):
+        _fit(seq, tmp_path / "d.gma", anny_body, gpu, decoders=str(tmp_path / "nothere.gma"))
 
 
 def test_eval_and_cli(seq, anny_body, gpu, tmp_path, capsys):

@@ -26,7 +26,9 @@ from gma.avatar.config import AvatarConfig
 from gma.body.geometry import vertex_normals
 from gma.body.placement import SurfelBinding, uniform_surfels
 
-__all__ = ["AvatarModel", "DecodedAvatar", "Mlp", "positional_encoding"]
+__all__ = ["DECODER_NAMES", "AvatarModel", "DecodedAvatar", "Mlp", "positional_encoding"]
+
+DECODER_NAMES = ("F_coarse", "F_fine", "T_color", "T_scale")
 
 
 def positional_encoding(x: torch.Tensor, freqs: int) -> torch.Tensor:
@@ -141,6 +143,17 @@ class AvatarModel(nn.Module):
                     "tex": [self.color_raw, self.scale_raw]}
         return {"geo_coarse": [self.f_geo, *self.F_coarse.parameters()], "geo_fine": list(self.F_fine.parameters()),
                 "tex": [self.f_tex, *self.T_color.parameters(), *self.T_scale.parameters()]}
+
+    def share_decoders_with(self, other: AvatarModel) -> None:
+        """Use ``other``'s decoder modules — the same parameters, not copies — so that avatars fitted
+        together train one set of decoders (the paper's shared decoders)."""
+        if self.direct or other.direct:
+            raise ValueError("the 'direct' representation has no decoders to share")
+        if self.config != other.config:
+            raise ValueError(f"decoders are shared only between avatars of one config: {self.config} vs "
+                             f"{other.config}")
+        for name in DECODER_NAMES:
+            setattr(self, name, getattr(other, name))
 
     def decoder_state(self) -> dict[str, torch.Tensor]:
         """The decoder weights only (shared across avatars by ``--decoders``)."""

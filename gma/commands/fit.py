@@ -1,7 +1,12 @@
 """``gma fit SEQ -o avatar.gma``: fit a Gaussian Morphing Avatar to a sequence (two stages: geometry
 through coarse surfels and the mesh layer, then fine surfels). Options override the chosen preset;
 the resolved config, checkpoint, metrics and previews go to ``<output>.fit/``. ``--resume`` continues
-an interrupted fit from its last checkpoint."""
+an interrupted fit from its last checkpoint.
+
+With several sequences (``gma fit SEQ1 SEQ2 ... -o DIR``) the decoders are shared, as in the paper: each
+sequence gets its own avatar (``DIR/<sequence>.gma``, its own features and body identity) and the
+decoders trained over all of them go to ``DIR/decoders.gma``. A new identity then fits only its
+features against them: ``gma fit NEW -o new.gma --decoders DIR/decoders.gma``."""
 
 from __future__ import annotations
 
@@ -14,8 +19,10 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("fit", help="fit an avatar to a sequence", description=__doc__,
                               formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("sequence", help="sequence directory (see docs/data.md)")
-    p.add_argument("-o", "--output", required=True, help="avatar file to write (.gma)")
+    p.add_argument("sequence", nargs="+", help="sequence directory (see docs/data.md); several train shared "
+                                                "decoders")
+    p.add_argument("-o", "--output", required=True, help="avatar file to write (.gma); a folder for several "
+                                                         "sequences")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint in <output>.fit/")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_dataclass_options(p, FitConfig)
@@ -30,9 +37,12 @@ def run(args: argparse.Namespace) -> int:
 
     overrides = collect_overrides(args)
     cfg = preset(overrides.pop("preset", "quick"), **overrides)
-    seq = read_sequence(args.sequence)
-    trainer = Trainer(cfg, seq, args.output, progress=not args.quiet)
+    seqs = [read_sequence(s) for s in args.sequence]
+    trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet)
     avatar = trainer.run(resume=args.resume)
-    print(f"wrote {args.output} ({avatar.info['fit_seconds']} s, {avatar.info['steps']} steps); "
+    written = ", ".join(str(s.out) for s in trainer.subjects)
+    if len(seqs) > 1:
+        written += f" and the shared decoders {trainer.out / 'decoders.gma'}"
+    print(f"wrote {written} ({avatar.info['fit_seconds']} s, {avatar.info['steps']} steps); "
           f"config, metrics and previews in {work_dir(trainer.out)}")
     return 0

@@ -13,11 +13,26 @@ from gma.data.atomic import atomic_write_bytes
 __all__ = ["load_checkpoint", "save_checkpoint"]
 
 
+def _unique_state(model: torch.nn.Module) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """(state dict without repeats, {repeated key: the key stored}). Avatars fitted together share their
+    decoder modules, so one tensor appears under several names; safetensors stores each tensor once."""
+    first: dict[int, str] = {}
+    unique, aliases = {}, {}
+    for key, value in model.state_dict().items():
+        ptr = value.data_ptr()
+        if ptr in first:
+            aliases[key] = first[ptr]
+        else:
+            first[ptr] = key
+            unique[key] = value
+    return unique, aliases
+
+
 def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.Optimizer, meta: dict) -> None:
     """Write model parameters, the optimiser's per-parameter state and ``meta`` (JSON-able) atomically."""
     from safetensors.torch import save
 
-    tensors = {f"model.{k}": v.detach().contiguous() for k, v in model.state_dict().items()}
+    tensors = {f"model.{k}": v.detach().contiguous() for k, v in _unique_state(model)[0].items()}
     state = optimizer.state_dict()
     for pid, st in state["state"].items():
         for name, value in st.items():
@@ -40,7 +55,14 @@ def load_checkpoint(path: Path, model: torch.nn.Module, optimizer_factory) -> tu
             meta = json.loads(f.metadata()["meta"])
     except Exception as exc:  # a damaged checkpoint must say which file
         raise ValueError(f"{path}: unreadable checkpoint ({exc}); delete it to start over") from exc
-    model.load_state_dict({k[6:]: v for k, v in tensors.items() if k.startswith("model.")})
+    state = {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}
+    for alias, stored in _unique_state(model)[1].items():
+        if stored in state:
+            state[alias] = state[stored]
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as exc:
+        raise ValueError(f"{path}: checkpoint does not match this fit ({exc}); delete it to start over") from exc
     opt = optimizer_factory(meta)
     state: dict = {}
     for key, value in tensors.items():

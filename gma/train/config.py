@@ -57,7 +57,8 @@ class FitConfig:
     cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (2x faster on CPU)")
     threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is fastest on a small CPU: torch and the "
                             "lavapipe rasteriser compete for cores (measured 3-6x slower torch with 2 on 2 cores)")
-    decoders: str = doc("", "frozen shared decoders (a .gma file): fit only the features")
+    decoders: str = doc("", "frozen shared decoders (a decoders.gma from a several-sequence fit, or any .gma "
+                            "avatar): fit only the features")
     checkpoint_every: int = doc(50, "steps between atomic checkpoints (also at each stage's end)")
     log_every: int = doc(10, "steps between loss records in metrics.json")
     preview_every: int = doc(100, "steps between preview renders (0: only at the end)")

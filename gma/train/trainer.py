@@ -1,6 +1,7 @@
 """The two-stage fit (``gma fit``): stage 1 fits geometry through one coarse surfel per face (the mesh
 layer), stage 2 the fine surfels with F_coarse and f_geo frozen. Ablations switch to one stage, to the
-mesh layer only, or to direct per-surfel parameters.
+mesh layer only, or to direct per-surfel parameters. Several sequences fit one avatar each around one
+set of shared decoders (written to ``decoders.gma`` for ``--decoders``).
 
 Everything a run produces lands in a work folder beside the output (``avatar.gma`` -> ``avatar.fit/``):
 ``config.json`` (resolved), ``checkpoint.safetensors`` (atomic, every ``checkpoint_every`` steps),
@@ -55,28 +56,77 @@ def plan_stages(cfg: FitConfig) -> list[Stage]:
             Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"))]
 
 
+@dataclass
+class Subject:
+    """One sequence being fitted: its training frames, its avatar, and the file the avatar goes to."""
+
+    name: str
+    seq: object
+    frames: FrameSet
+    avatar: Avatar
+    out: Path
+
+
+def subject_outputs(out: Path, seqs: list) -> list[Path]:
+    """Avatar files of a fit: ``out`` itself for one sequence; ``out/<sequence folder name>.gma`` for
+    several (then ``out`` is a folder, which also receives ``decoders.gma``)."""
+    if len(seqs) == 1:
+        return [out]
+    if out.suffix == ".gma":
+        raise ValueError(f"{out}: with several sequences, -o names a folder (one avatar per sequence and the "
+                         "shared decoders.gma go there)")
+    names = [Path(s.root).name or f"seq{i}" for i, s in enumerate(seqs)]
+    seen: dict[str, int] = {}
+    outs = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        outs.append(out / (f"{name}.gma" if names.count(name) == 1 else f"{name}_{seen[name]}.gma"))
+    return outs
+
+
 class Trainer:
-    """Fits an avatar to a sequence. ``run(resume)`` returns the fitted :class:`Avatar` (also saved)."""
+    """Fits an avatar to a sequence. ``run(resume)`` returns the fitted :class:`Avatar` (also saved).
+
+    Given several sequences, it fits one avatar per sequence — each its own features and body identity —
+    with one set of decoders shared by all (the paper's setup); steps take the sequences in turn, and
+    ``run`` returns the first avatar. ``self.avatar``, ``self.model``, ``self.frames`` are the first
+    sequence's."""
 
     def __init__(self, cfg: FitConfig, seq, out: str | Path, body=None, ctx=None, progress: bool = True):
+        from torch import nn
+
         from gma.body import load_body
 
-        self.cfg, self.seq, self.out = cfg, seq, Path(out)
+        seqs = list(seq) if isinstance(seq, (list, tuple)) else [seq]
+        if not seqs:
+            raise ValueError("no sequence to fit")
+        self.cfg, self.out = cfg, Path(out)
         self.dir = work_dir(self.out)
         self.body = body or load_body(cfg.avatar.body)
         self.ctx, self.progress = ctx, progress
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
-        self.frames: FrameSet = load_frames(seq, self.body, "train", cfg.resolution, cfg.max_frames)
-        torch.manual_seed(cfg.seed)
-        self.avatar = Avatar.create(cfg.avatar, self.body, self.frames.shape, seed=cfg.seed)
-        self.model = self.avatar.model
+        self.subjects: list[Subject] = []
+        for i, (s, o) in enumerate(zip(seqs, subject_outputs(self.out, seqs), strict=True)):
+            frames = load_frames(s, self.body, "train", cfg.resolution, cfg.max_frames)
+            torch.manual_seed(cfg.seed + i)
+            avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
+            if i > 0:
+                avatar.model.share_decoders_with(self.subjects[0].avatar.model)
+            self.subjects.append(Subject(o.stem, s, frames, avatar, o))
+        first = self.subjects[0]
+        self.seq, self.frames, self.avatar, self.model = first.seq, first.frames, first.avatar, first.avatar.model
+        self.models = [s.avatar.model for s in self.subjects]
+        # What the checkpoint holds and the optimiser walks (shared decoders appear once in parameters()).
+        self.net = self.model if len(self.models) == 1 else nn.ModuleList(self.models)
         self.frozen_decoders = False
         if cfg.decoders:
-            shared = Avatar.load(cfg.decoders, self.body)
-            missing = self.model.load_state_dict(shared.model.decoder_state(), strict=False).missing_keys
-            if set(missing) - {"f_geo", "f_tex"}:
-                raise ValueError(f"{cfg.decoders}: decoders do not fit this config (missing {missing})")
+            from gma.avatar.decoders import load_decoders
+
+            state = load_decoders(cfg.decoders, cfg.avatar)
+            unexpected = self.model.load_state_dict(state, strict=False).unexpected_keys
+            if unexpected:
+                raise ValueError(f"{cfg.decoders}: unexpected decoder tensors {unexpected}")
             self.frozen_decoders = True
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
@@ -89,11 +139,10 @@ class Trainer:
 
     # -- optimisation set-up ---------------------------------------------------------------------------
     def _optimizer(self, stage: Stage) -> torch.optim.Adam:
-        groups = self.model.param_groups()
-        learn = {id(p) for g in stage.groups for p in groups[g]}
-        feature_ids = {id(self.model.f_geo), id(self.model.f_tex)} if not self.model.direct else None
+        learn = {id(p) for m in self.models for g in stage.groups for p in m.param_groups()[g]}
+        feature_ids = None if self.model.direct else {id(p) for m in self.models for p in (m.f_geo, m.f_tex)}
         feats, decs = [], []
-        for p in self.model.parameters():
+        for p in self.net.parameters():
             on = id(p) in learn
             is_feature = feature_ids is None or id(p) in feature_ids
             if self.frozen_decoders and not is_feature:
@@ -114,42 +163,48 @@ class Trainer:
             step -= s.steps
         raise IndexError(step)
 
-    def _frame(self, step: int) -> int:
-        """Training frame of ``step``: a fresh seeded permutation per epoch, so resuming replays the order."""
-        n = len(self.frames)
-        epoch, k = divmod(step, n)
-        g = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + epoch)
-        return int(torch.randperm(n, generator=g)[k])
+    def _frame(self, step: int) -> tuple[int, int]:
+        """(subject, training frame) of ``step``: subjects in turn, and per subject a fresh seeded
+        permutation of its frames each epoch, so resuming replays the order."""
+        k, subject = divmod(step, len(self.subjects))
+        n = len(self.subjects[subject].frames)
+        epoch, k = divmod(k, n)
+        g = torch.Generator().manual_seed(self.cfg.seed * 1_000_003 + epoch + 7_919 * subject)
+        return subject, int(torch.randperm(n, generator=g)[k])
 
     # -- one step --------------------------------------------------------------------------------------
-    def _loss(self, stage: Stage, t: int, timers: dict) -> tuple[torch.Tensor, dict, dict]:
+    def _loss(self, stage: Stage, frame: tuple[int, int], timers: dict) -> tuple[torch.Tensor, dict, dict]:
         w, cfg = stage.weights, self.cfg
+        subject, t = frame
+        model, frames = self.models[subject], self.subjects[subject].frames
         t0 = time.perf_counter()
-        dec = self.model.decode(stage.layer)
+        dec = model.decode(stage.layer)
         t1 = time.perf_counter()
         marks = {}
-        out, posed = render_frame(dec, self.body, self.frames, t, cfg.background, self.ctx, cfg.cull_backfaces,
+        out, posed = render_frame(dec, self.body, frames, t, cfg.background, self.ctx, cfg.cull_backfaces,
                                   on_means=lambda g: marks.setdefault("render_bwd_done", time.perf_counter()) and None)
         t2 = time.perf_counter()
-        target = self.frames.target(t, cfg.background)
+        target = frames.target(t, cfg.background)
         l1, dssim = picture_loss(out.color, target)
-        terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - self.frames.masks[t]).abs().mean()}
+        terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - frames.masks[t]).abs().mean()}
         if w.lpips > 0 and self.lpips is not None:
             terms["lpips"] = self.lpips(out.color, target)
         offsets = dec.vertex_offsets
         if w.lap > 0:
             terms["lap"] = self.geo.laplacian(offsets)
         if w.edge > 0:
-            terms["edge"] = self.geo.edge(self.frames.rest[t], offsets)
+            terms["edge"] = self.geo.edge(frames.rest[t], offsets)
         if w.offset > 0 and stage.layer == "fine":
-            terms["offset"] = (dec.binding.offset / self.model.config.fine_offset_max).pow(2).mean()
+            terms["offset"] = (dec.binding.offset / model.config.fine_offset_max).pow(2).mean()
         if w.normal > 0:
-            terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, self.frames.K[t])
+            terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, frames.K[t])
         loss = sum(getattr(w, k) * v for k, v in terms.items())
         timers["decode"] += t1 - t0
         timers["posing_render_fwd"] += t2 - t1
         rec = {k: float(v.detach()) for k, v in terms.items()}
         rec["psnr"] = psnr(out.color.detach(), target)
+        if len(self.subjects) > 1:
+            rec["subject"] = subject
         return loss, rec, marks
 
     def _preview(self, step: int) -> None:
@@ -176,7 +231,7 @@ class Trainer:
             if saved and saved != cfg_json:
                 raise ValueError(f"{self.dir / 'config.json'}: the checkpoint was made with another config; "
                                  "resume with the same options, or fit without --resume to start over")
-            opt, meta = load_checkpoint(ckpt, self.model, lambda m: self._optimizer(self.stages[m["stage"]]))
+            opt, meta = load_checkpoint(ckpt, self.net, lambda m: self._optimizer(self.stages[m["stage"]]))
             step, elapsed, self.history = meta["step"], meta["elapsed"], meta["history"]
             self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
             if self.progress:
@@ -223,20 +278,33 @@ class Trainer:
                 if meta["stage"] != si:  # the next stage starts with a fresh optimiser
                     opt = self._optimizer(self.stages[meta["stage"]])
                     stage_idx = meta["stage"]
-                save_checkpoint(ckpt, self.model, opt, meta)
+                save_checkpoint(ckpt, self.net, opt, meta)
             if self.cfg.preview_every and step % self.cfg.preview_every == 0:
                 self._preview(step)
         bar.close()
         fit_seconds = time.perf_counter() - t_start
         self._preview(total)
-        self.avatar.info = {"fit_seconds": round(fit_seconds, 1), "steps": total, "sequence": str(self.seq.root),
-                            "preset": self.cfg.preset, "training": self.cfg.training,
-                            "final_train_psnr": self.history[-1]["psnr"] if self.history else None}
-        self.avatar.save(self.out)
+        shared = [s.name for s in self.subjects] if len(self.subjects) > 1 else None
+        for i, sub in enumerate(self.subjects):
+            mine = [h for h in self.history if h.get("subject", 0) == i]
+            sub.avatar.info = {"fit_seconds": round(fit_seconds, 1), "steps": total, "sequence": str(sub.seq.root),
+                               "preset": self.cfg.preset, "training": self.cfg.training,
+                               "final_train_psnr": mine[-1]["psnr"] if mine else None}
+            if shared:
+                sub.avatar.info["decoders_shared_with"] = shared
+            sub.avatar.save(sub.out)
+        if shared:
+            from gma.avatar.decoders import save_decoders
+
+            save_decoders(self.out / "decoders.gma", self.model,
+                          {"sequences": [str(s.seq.root) for s in self.subjects], "steps": total})
         n = max(1, self.timed_steps)
         metrics = {"fit_seconds": fit_seconds, "steps": total, "history": self.history,
                    "ms_per_step": {k: 1000 * v / n for k, v in self.timing.items()},
-                   "avatar_bytes": self.out.stat().st_size, "lpips": self.lpips is not None,
-                   "train_frames": len(self.frames), "resolution": list(self.frames.images.shape[1:3])}
+                   "avatar_bytes": sum(s.out.stat().st_size for s in self.subjects) // len(self.subjects),
+                   "lpips": self.lpips is not None, "train_frames": sum(len(s.frames) for s in self.subjects),
+                   "resolution": list(self.frames.images.shape[1:3])}
+        if shared:
+            metrics["subjects"] = shared
         atomic_write_json(self.dir / "metrics.json", metrics)
         return self.avatar
