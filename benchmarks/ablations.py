@@ -1,10 +1,10 @@
 """The paper's ablation table on one synthetic sequence: the full model against one-stage training, the
-mesh layer only (coarse surfels) and direct binding (free per-surfel parameters, no features/decoders).
-Each variant is fitted with the same preset, seed and total number of optimisation steps (S1 + S2), then
-evaluated on the held-out novel poses and views. Two-stage variants run S1 coarse-layer steps then S2
-steps of their final layer; one-stage training runs all S1 + S2 steps on the fine layer (the same total,
-so it gets S1 more fine-layer steps than the full model). Fits resume from ``--out`` (``--only`` refits
-or adds some variants and keeps the other rows of ``ablations.json``).
+mesh layer only (coarse surfels) and direct binding (free per-surfel parameters on the body's own faces:
+no features, decoders or mesh layer). Each variant is fitted with the same preset, seed and total number
+of optimisation steps (S1 + S2), then evaluated on the held-out novel poses and views. Two-stage variants
+run S1 coarse-layer steps then S2 steps of their final layer; one-stage training and direct binding
+(which has no mesh layer for a geometry stage) run all S1 + S2 steps on the fine layer. Fits resume from
+``--out`` (``--only`` refits or adds some variants and keeps the other rows of ``ablations.json``).
 
     python benchmarks/ablations.py [--seq out/bench/seq] [--preset quick] [--out out/bench/ablations]
 """

@@ -43,6 +43,21 @@ def test_mesh_layer_moves_along_normals(avatar, anny_body):
                           atol=1e-5)
 
 
+def test_direct_binding_has_no_mesh_layer(anny_body):
+    """The direct ablation binds free surfels to the body's own faces: no morph, and a normal offset that
+    reaches as far as the mesh layer and a fine surfel together."""
+    av = Avatar.create(AvatarConfig(**SMALL, representation="direct"), anny_body)
+    m = av.model
+    assert m.param_groups()["geo_coarse"] == [] and not hasattr(m, "f_geo")
+    with torch.no_grad():
+        m.fine_raw[..., 3] = 10.0
+    dec = av.decode()
+    assert torch.equal(dec.vertex_offsets, torch.zeros_like(dec.vertex_offsets))
+    reach = av.config.offset_max + av.config.fine_offset_max
+    expected = reach * float(torch.tanh(torch.tensor(10.0)))
+    assert torch.allclose(dec.binding.offset, torch.full_like(dec.binding.offset, expected))
+
+
 def test_pose_is_differentiable(avatar, anny_body):
     dec = avatar.model.decode("fine")
     params = anny_body.canonical_params(avatar.shape)

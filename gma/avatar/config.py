@@ -33,7 +33,8 @@ class AvatarConfig:
     opacity: float = doc(0.99, "fixed surfel opacity (the paper fixes 1; 0.99 keeps one surfel from "
                                "ending compositing outright, so occluded layers still get gradients)")
     representation: str = doc("full", "full | mesh_only (coarse surfels only) | direct (free per-surfel "
-                                      "parameters on the faces, no features or decoders)")
+                                      "parameters on the body's own faces: no features, decoders or mesh "
+                                      "layer; fitted in one stage)")
 
     def __post_init__(self):
         if self.representation not in ABLATIONS:

@@ -10,8 +10,10 @@ The morphed mesh is ``rest + O[:, None] · N_v`` (N_v the canonical vertex norma
 X_i = X_f + 1/3 Σ_k O_k N_{v,k} is then the morphed face centre). Fine surfels sit at (u, v, d) on the
 morphed faces; coarse surfels (stage 1) at the morphed face centres with the mean of the fine colours.
 
-Representation ``direct`` (ablation) replaces features and decoders by free per-vertex offsets and free
-per-surfel parameters in face-local coordinates, with the same output heads.
+Representation ``direct`` (ablation: the paper's Gaussians embedded directly in the body model's local
+coordinates) has no features, no decoders and no mesh layer: free per-surfel parameters in the body's
+own faces, through the same output heads, with a normal offset d that reaches as far as the mesh layer
+and a fine surfel together (``offset_max + fine_offset_max``), so clothing is reachable.
 """
 
 from __future__ import annotations
@@ -113,7 +115,6 @@ class AvatarModel(nn.Module):
         g = torch.Generator().manual_seed(seed)
         p = self.pe.shape[1]
         if c.representation == "direct":
-            self.vertex_raw = nn.Parameter(torch.zeros(nv))
             self.fine_raw = nn.Parameter(torch.zeros(nf, nk, 4))
             self.color_raw = nn.Parameter(torch.zeros(nf, nk, 3))
             self.scale_raw = nn.Parameter(torch.zeros(nf, nk, 2))
@@ -134,12 +135,19 @@ class AvatarModel(nn.Module):
     def direct(self) -> bool:
         return self.config.representation == "direct"
 
+    @property
+    def d_max(self) -> float:
+        """Largest |d| of a fine surfel off its face (m): off the morphed face, or off the body's own face
+        for ``direct``, which has no mesh layer to carry it out to the clothing."""
+        c = self.config
+        return c.offset_max + c.fine_offset_max if self.direct else c.fine_offset_max
+
     # -- groups of parameters (the trainer freezes by group) -------------------------------------------
     def param_groups(self) -> dict[str, list[nn.Parameter]]:
-        """Named parameter groups: ``geo_coarse`` (f_geo, F_coarse / the free vertex offsets), ``geo_fine``
+        """Named parameter groups: ``geo_coarse`` (f_geo, F_coarse; none for ``direct``), ``geo_fine``
         (F_fine / free surfel positions), ``tex`` (f_tex, T_color, T_scale / free colours and scales)."""
         if self.direct:
-            return {"geo_coarse": [self.vertex_raw], "geo_fine": [self.fine_raw],
+            return {"geo_coarse": [], "geo_fine": [self.fine_raw],
                     "tex": [self.color_raw, self.scale_raw]}
         return {"geo_coarse": [self.f_geo, *self.F_coarse.parameters()], "geo_fine": list(self.F_fine.parameters()),
                 "tex": [self.f_tex, *self.T_color.parameters(), *self.T_scale.parameters()]}
@@ -166,14 +174,12 @@ class AvatarModel(nn.Module):
         return torch.cat([f, pe], -1)
 
     def vertex_offset_scale(self) -> torch.Tensor:
-        """[V] signed normal offsets of the mesh layer (m)."""
+        """[V] signed normal offsets of the mesh layer (m); zero for ``direct``, which has none."""
         if self.direct:
-            raw = self.vertex_raw
-        else:
-            corner = self.F_coarse(self._inputs(self.f_geo, None))  # [F, 3]
-            raw = torch.zeros_like(self.vertex_count).index_add(0, self.faces.reshape(-1), corner.reshape(-1))
-            raw = raw / self.vertex_count
-        return self.config.offset_max * torch.tanh(raw)
+            return torch.zeros_like(self.vertex_count)
+        corner = self.F_coarse(self._inputs(self.f_geo, None))  # [F, 3]
+        raw = torch.zeros_like(self.vertex_count).index_add(0, self.faces.reshape(-1), corner.reshape(-1))
+        return self.config.offset_max * torch.tanh(raw / self.vertex_count)
 
     def vertex_offsets(self) -> torch.Tensor:
         """[V, 3] morph displacements (offset scale times canonical vertex normal)."""
@@ -193,7 +199,7 @@ class AvatarModel(nn.Module):
             scale_raw = self.T_scale(t).reshape(-1, nk, 2)
         fine_raw = fine_raw + self.fine_bias
         bary = torch.softmax(fine_raw[..., :3], -1)
-        d = self.config.fine_offset_max * torch.tanh(fine_raw[..., 3:])
+        d = self.d_max * torch.tanh(fine_raw[..., 3:])
         uvd = torch.cat([bary[..., :2], d], -1)
         colors = torch.sigmoid(color_raw)
         scales = nn.functional.softplus(scale_raw + self.scale_bias)

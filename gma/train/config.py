@@ -29,7 +29,7 @@ class LossWeights:
                            "costs 0.31 (x100 = 31, vs a picture loss of ~0.03) and stage 1 learnt 0.07 mm "
                            "offsets. 0.3 fit the clothing best in a stage-1 sweep over 0, 0.3, 1, 10, 100")
     normal: float = doc(0.05, "2DGS normal consistency: rendered normals vs normals of the rendered depth")
-    offset: float = doc(0.01, "mean (d / fine_offset_max)^2 of the fine surfels' normal offsets (fine layer "
+    offset: float = doc(0.01, "mean (d / d_max)^2 of the fine surfels' normal offsets (fine layer "
                               "only): keeps surfels on the morphed mesh. Without it Adam, which normalises a "
                               "tiny but biased gradient, drove d to -1 cm on most surfels: the skin sank "
                               "below the inner eye/mouth cavities, which then showed through the face")

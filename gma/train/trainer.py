@@ -47,9 +47,11 @@ class Stage:
 
 
 def plan_stages(cfg: FitConfig) -> list[Stage]:
+    """The stages of a fit. ``direct`` binding has no mesh layer for a geometry stage to fit, so it trains
+    its surfels in one stage of all the steps, like one-stage training."""
     rep = cfg.avatar.representation
     fine = "coarse" if rep == "mesh_only" else "fine"
-    if cfg.training == "one_stage":
+    if cfg.training == "one_stage" or rep == "direct":
         w = LossWeights(**{**cfg.weights1.__dict__, "lpips": cfg.weights2.lpips})
         return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"))]
     return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex")),
@@ -195,7 +197,7 @@ class Trainer:
         if w.edge > 0:
             terms["edge"] = self.geo.edge(frames.rest[t], offsets)
         if w.offset > 0 and stage.layer == "fine":
-            terms["offset"] = (dec.binding.offset / model.config.fine_offset_max).pow(2).mean()
+            terms["offset"] = (dec.binding.offset / model.d_max).pow(2).mean()
         if w.normal > 0:
             terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, frames.K[t])
         loss = sum(getattr(w, k) * v for k, v in terms.items())
