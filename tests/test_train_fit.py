@@ -188,6 +188,20 @@ def test_decoders_errors(seq, other_seq, anny_body, gpu, tmp_path):
         _fit(seq, tmp_path / "d.gma", anny_body, gpu, decoders=str(tmp_path / "nothere.gma"))
 
 
+def test_geometry_metrics(seq, anny_body, tmp_path):
+    from types import SimpleNamespace
+
+    from gma.avatar import AvatarConfig
+    from gma.train.evaluate import geometry_metrics
+
+    frames_shape = Trainer(preset("quick", **TINY), seq, tmp_path / "g.gma", body=anny_body,
+                           progress=False).frames.shape
+    flat = Avatar.create(AvatarConfig(**{**TINY["avatar"], "representation": "direct"}), anny_body, frames_shape)
+    g = geometry_metrics(flat, seq)  # no mesh layer: exactly the bare body's error, and no roughness
+    assert g["mesh_mm"] == pytest.approx(g["body_mm"]) and g["roughness_mm"] == 0
+    assert geometry_metrics(flat, SimpleNamespace(root=tmp_path)) is None  # no ground truth: no figures
+
+
 def test_eval_and_cli(seq, anny_body, gpu, tmp_path, capsys):
     from gma.cli import main
 
@@ -199,6 +213,9 @@ def test_eval_and_cli(seq, anny_body, gpu, tmp_path, capsys):
     assert len(res["frames"]) == 2 and res["mean"]["psnr"] > 10 and 0 < res["mean"]["ssim"] <= 1
     assert "mean" in (tmp_path / "ev" / "metrics_test_pose.txt").read_text()
     assert list((tmp_path / "ev").glob("test_pose_*.png"))
+    # synthetic sequences carry the true clothed mesh: the mesh layer is scored against it
+    geometry = json.loads((tmp_path / "ev" / "geometry.json").read_text())
+    assert geometry["body_clothed_mm"] > geometry["body_mm"] > 0 and geometry["gt_roughness_mm"] > 0
     # fit's options come from the dataclasses, nested ones with a dotted prefix
     import argparse
 

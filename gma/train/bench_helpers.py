@@ -22,7 +22,7 @@ def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: i
                  **overrides) -> dict:
     """Fit ``preset_name`` with ``overrides`` into ``out``, evaluate test_pose and test_view; a dict row."""
     from gma.train.config import preset
-    from gma.train.evaluate import evaluate
+    from gma.train.evaluate import evaluate, geometry_metrics
     from gma.train.trainer import Trainer, work_dir
 
     cfg = preset(preset_name, **overrides)
@@ -37,4 +37,7 @@ def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: i
     for split in ("test_pose", "test_view"):
         r = evaluate(avatar, seq, split, out.with_suffix(".eval"), res, cfg.background, body=body, ctx=ctx)
         row[split] = {k: round(v, 4) for k, v in r["mean"].items()}
+    geometry = geometry_metrics(avatar, seq)
+    if geometry is not None:
+        row["geometry"] = {k: round(v, 2) for k, v in geometry.items()}
     return row
