@@ -30,6 +30,9 @@ def main() -> int:
     p.add_argument("--seq", default="out/bench/seq", help="the new person (synthesised with seed 0 if missing)")
     p.add_argument("--train-seeds", type=int, nargs="+", default=[1, 2], help="synthetic people for the decoders")
     p.add_argument("--preset", default="quick")
+    p.add_argument("--training", default="two_stage", choices=("two_stage", "one_stage"),
+                   help="training of every fit here (one_stage: the paper's ablation, whose colour decoder it "
+                        "says generalises worse to new people)")
     p.add_argument("--out", default="out/bench/shared")
     args = p.parse_args()
     ctx, body = get_context(), load_body("anny")
@@ -40,7 +43,8 @@ def main() -> int:
     train_seqs = [sequence(str(out / f"seq{s}"), s) for s in args.train_seeds]
     base = preset(args.preset)
     n = len(train_seqs)
-    cfg = preset(args.preset, stage1_steps=base.stage1_steps * n, stage2_steps=base.stage2_steps * n)
+    cfg = preset(args.preset, stage1_steps=base.stage1_steps * n, stage2_steps=base.stage2_steps * n,
+                 training=args.training)
     t0 = time.perf_counter()
     trainer = Trainer(cfg, train_seqs, out / "decoders", body=body, ctx=ctx)
     trainer.run(resume=True)
@@ -58,11 +62,12 @@ def main() -> int:
     seq = sequence(args.seq, 0)
     decoders = str(out / "decoders" / "decoders.gma")
     rows["new person, frozen shared decoders"] = fit_and_eval(seq, out / "new_frozen.gma", args.preset, body, ctx,
-                                                              decoders=decoders)
-    rows["new person, own decoders"] = fit_and_eval(seq, out / "new_own.gma", args.preset, body, ctx)
+                                                              decoders=decoders, training=args.training)
+    rows["new person, own decoders"] = fit_and_eval(seq, out / "new_own.gma", args.preset, body, ctx,
+                                                    training=args.training)
     (out / "shared.json").write_text(json.dumps(rows, indent=2))
 
-    print(f"\nShared decoders ({args.preset} preset); novel pose | novel view")
+    print(f"\nShared decoders ({args.preset} preset, {args.training}); novel pose | novel view")
     print(f"{'avatar':40s} {'PSNR':>7s} {'SSIM':>7s} | {'PSNR':>7s} {'SSIM':>7s} | {'fit s':>6s}")
     for name, r in rows.items():
         a, b = r["test_pose"], r["test_view"]
