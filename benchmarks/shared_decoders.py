@@ -21,9 +21,8 @@ def main() -> int:
     from gma.avatar import Avatar
     from gma.body import load_body
     from gma.gpu import get_context
-    from gma.train.bench_helpers import fit_and_eval, sequence
+    from gma.train.bench_helpers import evaluate_row, fit_and_eval, sequence
     from gma.train.config import preset
-    from gma.train.evaluate import evaluate
     from gma.train.trainer import Trainer, work_dir
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -51,13 +50,9 @@ def main() -> int:
     shared_s = json.loads((work_dir(out / "decoders") / "metrics.json").read_text())["fit_seconds"]
     print(f"shared decoders over {n} people: {shared_s:.0f} s ({time.perf_counter() - t0:.0f} s wall)")
     for sub in trainer.subjects:
-        avatar = Avatar.load(sub.out, body)
-        row = {"fit_s": round(shared_s / n, 1)}
-        for split in ("test_pose", "test_view"):
-            r = evaluate(avatar, sub.seq, split, sub.out.with_suffix(".eval"), cfg.resolution, cfg.background,
-                         body=body, ctx=ctx)
-            row[split] = {k: round(v, 4) for k, v in r["mean"].items()}
-        rows[f"training person {sub.name} (shared fit)"] = row
+        row = evaluate_row(Avatar.load(sub.out, body), sub.seq, sub.out.with_suffix(".eval"), cfg.resolution,
+                           cfg.background, body, ctx)
+        rows[f"training person {sub.name} (shared fit)"] = {"fit_s": round(shared_s / n, 1), **row}
 
     seq = sequence(args.seq, 0)
     decoders = str(out / "decoders" / "decoders.gma")

@@ -28,7 +28,7 @@ from gma.avatar.model import AvatarModel, DecodedAvatar
 __all__ = ["FORMAT_VERSION", "Avatar", "AvatarFileError"]
 
 FORMAT_VERSION = 1
-_MAGIC = "gma"
+AVATAR_FORMAT = "gma"
 
 
 class AvatarFileError(ValueError):
@@ -77,7 +77,7 @@ class Avatar:
         tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
         tensors["rest_vertices"] = self.rest_vertices.contiguous()
         tensors["shape"] = self.shape.float().contiguous()
-        meta = {"format": _MAGIC, "version": str(FORMAT_VERSION), "body": self.body_name,
+        meta = {"format": AVATAR_FORMAT, "version": str(FORMAT_VERSION), "body": self.body_name,
                 "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
                 "info": json.dumps(self.info)}
         return save(tensors, metadata=meta)
@@ -127,6 +127,13 @@ class Avatar:
 
 def read_gma(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
     """(tensors, metadata) of a ``.gma`` file after format and version checks."""
+    return read_tagged_file(path, {AVATAR_FORMAT: FORMAT_VERSION}, "a .gma avatar")
+
+
+def read_tagged_file(path: Path, formats: dict[str, int], what: str) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
+    """(tensors, metadata) of a GMA safetensors file whose metadata ``format`` is one of ``formats`` (format
+    name -> newest version this GMA reads). Errors are :class:`AvatarFileError` naming the file and
+    ``what`` was expected (e.g. "a .gma avatar")."""
     from safetensors import SafetensorError
     from safetensors.torch import load
 
@@ -138,17 +145,17 @@ def read_gma(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:
         with safe_open(str(path), "pt") as f:
             meta = f.metadata() or {}
     except (SafetensorError, ValueError, OSError, RuntimeError) as exc:
-        raise AvatarFileError(f"{path}: not a .gma avatar (not a readable safetensors file: {exc})") from exc
-    if meta.get("format") != _MAGIC:
-        raise AvatarFileError(f"{path}: safetensors file without GMA avatar metadata (format="
-                              f"{meta.get('format')!r})")
+        raise AvatarFileError(f"{path}: not {what} (not a readable safetensors file: {exc})") from exc
+    kind = meta.get("format")
+    if kind not in formats:
+        raise AvatarFileError(f"{path}: safetensors file without the metadata of {what} (format={kind!r})")
     try:
         version = int(meta.get("version", ""))
     except ValueError:
         raise AvatarFileError(f"{path}: bad format version {meta.get('version')!r}") from None
-    if version > FORMAT_VERSION:
-        raise AvatarFileError(f"{path}: avatar format version {version} is newer than this GMA supports "
-                              f"({FORMAT_VERSION}); update GMA to open it")
+    if version > formats[kind]:
+        raise AvatarFileError(f"{path}: {kind} format version {version} is newer than this GMA supports "
+                              f"({formats[kind]}); update GMA to open it")
     if version < 1:
         raise AvatarFileError(f"{path}: bad format version {version}")
     return tensors, meta

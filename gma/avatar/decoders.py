@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from gma.avatar.avatar import AvatarFileError
+from gma.avatar.avatar import AVATAR_FORMAT, FORMAT_VERSION, AvatarFileError, read_tagged_file
 from gma.avatar.config import AvatarConfig
 from gma.avatar.model import AvatarModel
 
@@ -53,28 +53,12 @@ def load_decoders(path: str | os.PathLike, config: AvatarConfig) -> dict[str, to
     """The decoder weights in ``path`` (a decoders file or a ``.gma`` avatar), checked against ``config``:
     a file whose decoders were built for other feature sizes, widths or surfel counts is refused with a
     message that names the file and the fields that differ."""
-    from safetensors import SafetensorError, safe_open
-    from safetensors.torch import load_file
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: decoders file not found")
-    try:
-        with safe_open(str(path), "pt") as f:
-            meta = f.metadata() or {}
-        tensors = load_file(str(path))
-    except (SafetensorError, ValueError, OSError, RuntimeError) as exc:
-        raise AvatarFileError(f"{path}: not a decoders or .gma file (not readable safetensors: {exc})") from exc
-    kind = meta.get("format")
-    if kind == DECODERS_FORMAT:
-        if int(meta.get("version", "0")) > DECODERS_VERSION:
-            raise AvatarFileError(f"{path}: decoders format version {meta['version']} is newer than this GMA "
-                                  f"supports ({DECODERS_VERSION}); update GMA to use it")
-        prefix = "decoder."
-    elif kind == "gma":
-        prefix = "model."
-    else:
-        raise AvatarFileError(f"{path}: neither a decoders file nor a .gma avatar (format={kind!r})")
+    tensors, meta = read_tagged_file(path, {DECODERS_FORMAT: DECODERS_VERSION, AVATAR_FORMAT: FORMAT_VERSION},
+                                     "a decoders file or a .gma avatar")
+    prefix = "decoder." if meta["format"] == DECODERS_FORMAT else "model."
     try:
         theirs = AvatarConfig.from_dict(json.loads(meta["config"]))
     except (KeyError, ValueError, TypeError) as exc:

@@ -22,7 +22,6 @@ def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: i
                  **overrides) -> dict:
     """Fit ``preset_name`` with ``overrides`` into ``out``, evaluate test_pose and test_view; a dict row."""
     from gma.train.config import preset
-    from gma.train.evaluate import evaluate, geometry_metrics
     from gma.train.trainer import Trainer, work_dir
 
     cfg = preset(preset_name, **overrides)
@@ -33,9 +32,19 @@ def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: i
     row = {"fit_s": round(metrics["fit_seconds"], 1), "wall_s": round(fit_s, 1), "steps": metrics["steps"],
            "avatar_mb": round(out.stat().st_size / 2**20, 2),
            "ms_per_step": {k: round(v, 1) for k, v in metrics["ms_per_step"].items()}}
-    res = eval_resolution or cfg.resolution
+    row.update(evaluate_row(avatar, seq, out.with_suffix(".eval"), eval_resolution or cfg.resolution,
+                            cfg.background, body, ctx))
+    return row
+
+
+def evaluate_row(avatar, seq, eval_dir: Path, resolution: int, background: float, body, ctx) -> dict:
+    """Mean metrics of ``avatar`` on test_pose and test_view (images in ``eval_dir``), and the geometry
+    scores when ``seq`` has a ground-truth mesh: {"test_pose": {...}, "test_view": {...}[, "geometry"]}."""
+    from gma.train.evaluate import evaluate, geometry_metrics
+
+    row = {}
     for split in ("test_pose", "test_view"):
-        r = evaluate(avatar, seq, split, out.with_suffix(".eval"), res, cfg.background, body=body, ctx=ctx)
+        r = evaluate(avatar, seq, split, eval_dir, resolution, background, body=body, ctx=ctx)
         row[split] = {k: round(v, 4) for k, v in r["mean"].items()}
     geometry = geometry_metrics(avatar, seq)
     if geometry is not None:

@@ -12,7 +12,7 @@ import torch
 from gma.avatar.avatar import Avatar
 from gma.data.atomic import atomic_write_json
 from gma.train.data import load_frames
-from gma.train.losses import load_lpips
+from gma.train.losses import GeometryTerms, load_lpips
 from gma.train.metrics import psnr, ssim
 from gma.train.render_step import render_frame
 
@@ -65,27 +65,28 @@ def geometry_metrics(avatar: Avatar, seq) -> dict | None:
     vertices the clothing moves (> 2 mm); body_mm / body_clothed_mm: the same for the unmorphed body
     (where the mesh layer started); roughness_mm: RMS of the umbrella Laplacian of the morph (a noisy
     mesh layer scores high); the ground truth's is ``gt_roughness_mm``."""
-    from gma.body.geometry import uniform_laplacian
+    from gma.data.synth.generate import gt_mesh
 
-    path = Path(seq.root) / "gt_mesh.npz"
-    if not path.is_file():
+    try:
+        truth = gt_mesh(seq.root)
+    except FileNotFoundError:
         return None
-    with np.load(path, allow_pickle=False) as d:
-        gt, gt_offsets = torch.from_numpy(d["rest_vertices"]).float(), torch.from_numpy(d["offsets"]).float()
+    gt, gt_offsets = torch.from_numpy(truth["rest_vertices"]).float(), torch.from_numpy(truth["offsets"]).float()
     rest = avatar.rest_vertices.float()
     if gt.shape != rest.shape:
-        raise ValueError(f"{path}: ground-truth mesh has {gt.shape[0]} vertices, the avatar's body {rest.shape[0]}")
+        raise ValueError(f"{seq.root}: ground-truth mesh has {gt.shape[0]} vertices, the avatar's body "
+                         f"{rest.shape[0]}")
     offsets = avatar.decode().vertex_offsets
     clothed = gt_offsets.norm(dim=1) > 0.002
     err, base = (rest + offsets - gt).norm(dim=1), (rest - gt).norm(dim=1)
-    lap = uniform_laplacian(avatar.model.faces, rest.shape[0])
+    geo = GeometryTerms(avatar.model.faces, rest.shape[0])  # its laplacian() is the mean squared norm
 
-    def rms_lap(x):
-        return float(torch.sparse.mm(lap, x).pow(2).sum(1).mean().sqrt()) * 1000
+    def rms_laplacian_mm(x):
+        return float(geo.laplacian(x).sqrt()) * 1000
 
     return {"mesh_mm": float(err.mean()) * 1000, "clothed_mm": float(err[clothed].mean()) * 1000,
             "body_mm": float(base.mean()) * 1000, "body_clothed_mm": float(base[clothed].mean()) * 1000,
-            "roughness_mm": rms_lap(offsets), "gt_roughness_mm": rms_lap(gt_offsets)}
+            "roughness_mm": rms_laplacian_mm(offsets), "gt_roughness_mm": rms_laplacian_mm(gt_offsets)}
 
 
 def format_table(result: dict) -> str:
