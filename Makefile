@@ -1,7 +1,7 @@
 # The two commands in the README: `make demo` (main job on the built-in default) and `make test`.
 PYTHON ?= python3
 export XDG_RUNTIME_DIR ?= /tmp/gma-xdg-$(shell id -u)
-export ANNY_CACHE_DIR ?= $(HOME)/.cache/gma/anny
+# Anny's cache defaults to ~/.cache/gma/anny in the code (gma/body/anny_body.py); set ANNY_CACHE_DIR to move it.
 
 .PHONY: install demo test lint bench
 

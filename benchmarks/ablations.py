@@ -24,10 +24,11 @@ VARIANTS = {
 
 
 def main() -> int:
+    from fit_helpers import fit_and_eval, sequence
+
     from gma.avatar import Avatar
     from gma.body import load_body
     from gma.gpu import get_context
-    from gma.train.bench_helpers import fit_and_eval, sequence
     from gma.train.evaluate import geometry_metrics
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)

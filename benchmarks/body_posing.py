@@ -24,6 +24,8 @@ import sys
 import tempfile
 import time
 
+from gma.body.anny_body import DEFAULT_ANNY_CACHE_DIR
+
 CREATE_SNIPPET = (
     "import time; t = time.perf_counter(); from gma.body import load_body; load_body('anny'); "
     "print(time.perf_counter() - t)"
@@ -54,7 +56,7 @@ def main() -> None:
     ap.add_argument("--cold", action="store_true", help="also time creation with an empty anny cache")
     args = ap.parse_args()
     os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
-    cache = os.environ.setdefault("ANNY_CACHE_DIR", os.path.expanduser("~/.cache/gma/anny"))
+    cache = os.environ.get("ANNY_CACHE_DIR", str(DEFAULT_ANNY_CACHE_DIR))
 
     if args.cold:
         with tempfile.TemporaryDirectory(prefix="anny-cold-") as d:

@@ -49,7 +49,7 @@ def workload_surfels(module, n: int) -> tuple[dict, object]:
     """Standard scene as 2D surfels (third scale dropped) and its camera."""
     import numpy as np
 
-    from gma.render.camera import Camera
+    from gma.core.camera import Camera
 
     w = module.make_workload(n)
     scene = {"means": w["means"], "quats": w["quats"], "scales": np.ascontiguousarray(w["scales"][:, :2]),

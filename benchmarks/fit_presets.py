@@ -12,9 +12,10 @@ from pathlib import Path
 
 
 def main() -> int:
+    from fit_helpers import fit_and_eval, sequence
+
     from gma.body import load_body
     from gma.gpu import get_context
-    from gma.train.bench_helpers import fit_and_eval, sequence
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--presets", nargs="+", default=["quick"])

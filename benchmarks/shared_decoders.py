@@ -18,10 +18,11 @@ from pathlib import Path
 
 
 def main() -> int:
+    from fit_helpers import evaluate_row, fit_and_eval, sequence
+
     from gma.avatar import Avatar
     from gma.body import load_body
     from gma.gpu import get_context
-    from gma.train.bench_helpers import evaluate_row, fit_and_eval, sequence
     from gma.train.config import preset
     from gma.train.trainer import Trainer, work_dir
 

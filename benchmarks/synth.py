@@ -11,7 +11,6 @@ per second of generation and the size of each part of the output.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 import time
@@ -20,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-os.environ.setdefault("ANNY_CACHE_DIR", str(Path.home() / ".cache" / "gma" / "anny"))
 
 
 def _du(path: Path) -> int:
@@ -62,10 +60,10 @@ def main() -> None:
     args = ap.parse_args()
 
     from gma.body import load_body
-    from gma.data.synth.generate import SynthConfig, synthesize
-    from gma.data.synth.mesh_raster import MeshRasterizer
-    from gma.data.synth.person import make_person
     from gma.gpu import get_context
+    from gma.synth.generate import SynthConfig, synthesize
+    from gma.synth.mesh_raster import MeshRasterizer
+    from gma.synth.person import make_person
 
     t = time.perf_counter()
     ctx = get_context()

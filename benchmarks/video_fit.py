@@ -86,7 +86,7 @@ def main(argv=None) -> int:
     import imageio.v3 as iio
 
     from gma.body import load_body
-    from gma.data.synth.generate import SynthConfig, synthesize
+    from gma.synth.generate import SynthConfig, synthesize
     from gma.video.report import mask_iou
     from gma.video.rig import AnnyRig
 

@@ -87,7 +87,6 @@ def main() -> None:
     ap.add_argument("--sample-every", type=int, default=5)
     args = ap.parse_args()
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
-    os.environ.setdefault("ANNY_CACHE_DIR", os.path.expanduser("~/.cache/gma/anny"))
     xvfb = ensure_display()
     try:
         from gma.gpu import get_context

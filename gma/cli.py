@@ -10,10 +10,12 @@ import pkgutil
 import sys
 
 import gma.commands
+from gma.core.report import run_reporting_errors
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="gma", description="Gaussian Morphing Avatars")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of every error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(gma.commands.__path__), key=lambda m: m.name):
         module = importlib.import_module(f"gma.commands.{info.name}")
@@ -28,13 +30,8 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    try:
-        return int(args.func(args) or 0)
-    except (FileNotFoundError, ValueError) as exc:
-        # User-facing errors (bad files, bad arguments) print one clear line instead of a traceback.
-        print(f"gma {args.command}: error: {exc}", file=sys.stderr)
-        return 1
-
+    # User errors (bad files, bad arguments, outputs that cannot be written) print one clear line.
+    return run_reporting_errors(lambda: args.func(args), f"gma {args.command}", args.debug)
 
 if __name__ == "__main__":
     sys.exit(main())

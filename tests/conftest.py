@@ -9,7 +9,6 @@ import pytest
 
 os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
 # Anny builds a ~1 GB cache on first model creation; keep it in one stable place across runs.
-os.environ.setdefault("ANNY_CACHE_DIR", os.path.join(os.path.expanduser("~"), ".cache", "gma", "anny"))
 
 
 @pytest.fixture(scope="session")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from gma.render.camera import Camera
+from gma.core.camera import Camera
 from gma.render.scenes import random_scene
 
 # GPU and reference compute the same float32 formulas in a different order (fused multiply-adds,

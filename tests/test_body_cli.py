@@ -22,6 +22,6 @@ def test_export_obj(anny_body, tmp_path):
 
 def test_smplx_without_files_is_one_clear_line(tmp_path, monkeypatch, capsys):
     monkeypatch.delenv("GMA_SMPLX_DIR", raising=False)
-    assert main(["body", "info", "--model", "smplx", "--smplx-dir", str(tmp_path)]) == 1
+    assert main(["body", "info", "--model", "smplx", "--smplx-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "SMPLX_NEUTRAL.npz" in err and "smpl-x.is.tue.mpg.de" in err

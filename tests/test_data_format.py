@@ -9,9 +9,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
+from gma.body.params import find_model_file, load_body
+from gma.core.atomic import atomic_write_bytes
 from gma.data import Cameras, SequenceBody, SequenceWriter, look_at, read_sequence
-from gma.data.atomic import atomic_write_bytes
-from gma.data.body_params import find_model_file, load_body
 
 W, H, T = 24, 16, 3
 

@@ -347,6 +347,6 @@ def test_cli_import(tmp_path, capsys):
     args = ["import", "peoplesnapshot", str(src), str(tmp_path / "out"), "--smpl-dir", str(models)]
     assert main(args + ["--skip", "3"]) == 0
     assert "2 frames" in capsys.readouterr().out
-    assert main(args) == 1
+    assert main(args) == 2
     assert "already exists" in capsys.readouterr().err
     assert main(args + ["--force"]) == 0 and len(read_sequence(tmp_path / "out", check_body_model=False)) == 6

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gma.data.synth.mesh_raster import MeshRasterizer, TexturedMesh, projection_matrix
+from gma.synth.mesh_raster import MeshRasterizer, TexturedMesh, projection_matrix
 
 pytestmark = pytest.mark.gpu
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gma.data import read_sequence
-from gma.data.synth.generate import SynthConfig, gt_mesh, synthesize
+from gma.synth.generate import SynthConfig, gt_mesh, synthesize
 
 pytestmark = pytest.mark.gpu
 
@@ -121,7 +121,7 @@ def test_bad_config(tmp_path, gpu, anny):
 
 
 def test_cli_size_parser():
-    from gma.commands import parse_image_size as _size
+    from gma.core.args import parse_image_size as _size
 
     assert _size("512") == (512, 512) and _size("640x480") == (640, 480)
     with pytest.raises(Exception, match="N or WxH"):

@@ -106,5 +106,5 @@ def test_render_ply_command(gpu, tmp_path, capsys):
     # A bad camera file is one clear line, not a traceback.
     (tmp_path / "bad.json").write_text("{")
     assert gma_main(["render-ply", str(tmp_path / "s.ply"), "--camera", str(tmp_path / "bad.json"),
-                     "-o", str(tmp_path / "x.png")]) == 1
+                     "-o", str(tmp_path / "x.png")]) == 2
     assert "bad.json" in capsys.readouterr().err

@@ -18,7 +18,7 @@ TINY = dict(resolution=48, checkpoint_every=1, log_every=1, preview_every=0, sta
 
 
 def _tiny_sequence(folder, seed, gpu, anny_body):
-    from gma.data.synth.generate import SynthConfig, synthesize
+    from gma.synth.generate import SynthConfig, synthesize
 
     cfg = SynthConfig(width=64, height=64, train_frames=4, test_pose_frames=2, test_view_frames=1,
                       supersample=1, texture_size=256, seed=seed)

@@ -24,7 +24,7 @@ def synth_clip(tmp_path_factory, gpu, anny_body):
     """A 10-frame synthetic turn (192 px) and its mp4 encoding."""
     import imageio.v3 as iio
 
-    from gma.data.synth.generate import SynthConfig, synthesize
+    from gma.synth.generate import SynthConfig, synthesize
 
     root = tmp_path_factory.mktemp("video")
     cfg = SynthConfig(width=192, height=192, train_frames=10, test_pose_frames=0, test_view_frames=0,

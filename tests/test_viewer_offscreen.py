@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import viewer_helpers
 
-from gma.render.camera import Camera
+from gma.core.camera import Camera
 from gma.view.orbit import CameraPath, OrbitCamera
 from gma.view.pipelines import clip_matrix
 from gma.view.selection import (

@@ -6,7 +6,8 @@ import argparse
 import os
 import sys
 
-from gma.commands import parse_image_size
+from gma.core.args import parse_image_size
+from gma.core.report import run_reporting_errors
 
 __all__ = ["add_arguments", "main", "run"]
 
@@ -61,13 +62,9 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="gma-viewer", description="GMA real-time viewer")
     add_arguments(parser)
+    parser.add_argument("--debug", action="store_true", help="show the traceback of every error")
     args = parser.parse_args(argv)
-    try:
-        return run(args)
-    except (FileNotFoundError, ValueError) as exc:
-        print(f"gma-viewer: error: {exc}", file=sys.stderr)
-        return 1
-
+    return run_reporting_errors(lambda: run(args), "gma-viewer", args.debug)
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -11,6 +11,7 @@ from imgui_bundle import imgui
 from wgpu.utils.imgui.imgui_backend import ImguiWgpuBackend
 
 from gma.body.motions import MOTIONS
+from gma.core.errors import GmaError
 
 __all__ = ["Panels"]
 
@@ -131,7 +132,7 @@ class Panels:
             if imgui.button("load##motion") and self.motion_path:
                 try:
                     s.play_motion(self.motion_path)
-                except (OSError, ValueError) as exc:
+                except (GmaError, OSError, ValueError) as exc:
                     s.message = str(exc)
             if ctl.motion is not None:
                 if imgui.button("pause" if ctl.playing else "play"):
@@ -191,7 +192,7 @@ class Panels:
             if imgui.button("record"):
                 try:
                     s.start_recording()
-                except (OSError, ValueError) as exc:
+                except (GmaError, OSError, ValueError) as exc:
                     s.message = str(exc)
         else:
             imgui.progress_bar(s.recorder.progress, imgui.ImVec2(-1, 0),
@@ -221,7 +222,7 @@ class Panels:
             if imgui.button(label):
                 try:
                     action(self.selection_path)
-                except (OSError, ValueError) as exc:
+                except (GmaError, OSError, ValueError) as exc:
                     s.message = str(exc)
             imgui.same_line()
         imgui.new_line()

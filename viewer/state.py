@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.camera import Camera
 from gma.gpu import GpuContext
-from gma.render.camera import Camera
 from gma.view import CameraPath, FrameRenderer, OrbitCamera, Scene, SurfelSource
 from gma.view.controls import BodyControls, load_motion
 from gma.view.record import Recorder

@@ -15,6 +15,7 @@ import numpy as np
 import wgpu
 from wgpu.utils.glfw_present_info import get_glfw_present_info
 
+from gma.core.errors import GmaError
 from gma.view.renderer import read_texture
 from gma.view.timing import FrameStats
 from viewer.state import ViewerState
@@ -104,7 +105,7 @@ class ViewerWindow:
                 self.state.select_box((x0, y0, x, y), self.size, mode)
             elif d["kind"] == "lasso" and len(d["points"]) >= 3:
                 self.state.select_lasso(d["points"], self.size, mode)
-        except ValueError as exc:
+        except (GmaError, ValueError) as exc:
             self.state.message = str(exc)
 
     def _on_cursor(self, window, x, y) -> None:

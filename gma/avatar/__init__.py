@@ -7,27 +7,20 @@ posing, and the ``.gma`` file.
     renderer = AvatarRenderer(ctx, avatar)    # GPU posing + rendering (gma.avatar.gpu)
 """
 
-from gma.avatar.avatar import FORMAT_VERSION, Avatar, AvatarFileError
-from gma.avatar.config import ABLATIONS, AvatarConfig
-from gma.avatar.model import AvatarModel, DecodedAvatar
-from gma.avatar.posing import pose_surfels
+import importlib
+
+# Exports load on first use (PEP 562), so that the light ``gma.avatar.config`` (which ``gma --help``
+# needs to build the fit options) does not pull torch in through this package's __init__.
+_EXPORTS = {
+    "FORMAT_VERSION": "gma.avatar.avatar", "Avatar": "gma.avatar.avatar", "AvatarFileError": "gma.avatar.avatar",
+    "ABLATIONS": "gma.avatar.config", "AvatarConfig": "gma.avatar.config",
+    "AvatarModel": "gma.avatar.model", "DecodedAvatar": "gma.avatar.model",
+    "pose_surfels": "gma.avatar.posing",
+}
+__all__ = sorted(_EXPORTS)
 
 
-def open_view_source(ctx, path):
-    """The viewer's adapter (``gma view avatar.gma``): a ``gma.view.BodySource`` showing the avatar."""
-    from gma.avatar.gpu import open_view_source as _open
-
-    return _open(ctx, path)
-
-
-__all__ = [
-    "ABLATIONS",
-    "FORMAT_VERSION",
-    "Avatar",
-    "AvatarConfig",
-    "AvatarFileError",
-    "AvatarModel",
-    "DecodedAvatar",
-    "open_view_source",
-    "pose_surfels",
-]
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'gma.avatar' has no attribute {name!r}")

@@ -21,9 +21,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
+from safetensors import SafetensorError, safe_open
+from safetensors.torch import load, save
 
 from gma.avatar.config import AvatarConfig
 from gma.avatar.model import AvatarModel, DecodedAvatar
+from gma.body import load_body
+from gma.core.atomic import atomic_write_bytes
+from gma.core.errors import InputError
 
 __all__ = ["FORMAT_VERSION", "Avatar", "AvatarFileError"]
 
@@ -31,7 +36,7 @@ FORMAT_VERSION = 1
 AVATAR_FORMAT = "gma"
 
 
-class AvatarFileError(ValueError):
+class AvatarFileError(InputError):
     """A ``.gma`` file that cannot be read (the message names the file)."""
 
 
@@ -72,8 +77,6 @@ class Avatar:
 
     # -- file IO ---------------------------------------------------------------------------------------
     def to_bytes(self) -> bytes:
-        from safetensors.torch import save
-
         tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
         tensors["rest_vertices"] = self.rest_vertices.contiguous()
         tensors["shape"] = self.shape.float().contiguous()
@@ -84,8 +87,6 @@ class Avatar:
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the avatar to ``path`` atomically; returns the path."""
-        from gma.data.atomic import atomic_write_bytes
-
         path = Path(path)
         atomic_write_bytes(path, self.to_bytes())
         return path
@@ -104,8 +105,6 @@ class Avatar:
         except (ValueError, TypeError, KeyError) as exc:
             raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from exc
         if body is None:
-            from gma.body import load_body
-
             body = load_body(meta["body"])
         if body.name != meta["body"]:
             raise AvatarFileError(f"{path}: avatar is bound to body {meta['body']!r}, got {body.name!r}")
@@ -134,14 +133,10 @@ def read_tagged_file(path: Path, formats: dict[str, int], what: str) -> tuple[di
     """(tensors, metadata) of a GMA safetensors file whose metadata ``format`` is one of ``formats`` (format
     name -> newest version this GMA reads). Errors are :class:`AvatarFileError` naming the file and
     ``what`` was expected (e.g. "a .gma avatar")."""
-    from safetensors import SafetensorError
-    from safetensors.torch import load
 
     data = path.read_bytes()
     try:
         tensors = load(data)
-        from safetensors import safe_open
-
         with safe_open(str(path), "pt") as f:
             meta = f.metadata() or {}
     except (SafetensorError, ValueError, OSError, RuntimeError) as exc:

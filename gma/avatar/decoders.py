@@ -19,10 +19,12 @@ import os
 from pathlib import Path
 
 import torch
+from safetensors.torch import save
 
 from gma.avatar.avatar import AVATAR_FORMAT, FORMAT_VERSION, AvatarFileError, read_tagged_file
 from gma.avatar.config import AvatarConfig
 from gma.avatar.model import AvatarModel
+from gma.core.atomic import atomic_write_bytes
 
 __all__ = ["ARCHITECTURE_FIELDS", "load_decoders", "save_decoders"]
 
@@ -35,10 +37,6 @@ ARCHITECTURE_FIELDS = ("body", "representation", "feature_dim", "hidden", "pe_fr
 
 def save_decoders(path: str | os.PathLike, model: AvatarModel, info: dict | None = None) -> Path:
     """Write the decoders of ``model`` to ``path`` atomically; returns the path."""
-    from safetensors.torch import save
-
-    from gma.data.atomic import atomic_write_bytes
-
     if model.direct:
         raise ValueError("the 'direct' representation has no decoders to share")
     tensors = {f"decoder.{k}": v.detach().contiguous().cpu() for k, v in model.decoder_state().items()}

@@ -9,8 +9,10 @@ import torch
 
 from gma.avatar.avatar import Avatar
 from gma.avatar.model import DecodedAvatar
+from gma.body.gpu_posing import GpuPoser
+from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs
 
-__all__ = ["AvatarRenderer", "open_view_source"]
+__all__ = ["AvatarRenderer"]
 
 
 class AvatarRenderer:
@@ -21,9 +23,6 @@ class AvatarRenderer:
     """
 
     def __init__(self, ctx, avatar: Avatar, body, decoded: DecodedAvatar | None = None):
-        from gma.body.gpu_posing import GpuPoser
-        from gma.render import SurfelBuffers, SurfelRasterizer
-
         self.ctx, self.avatar, self.body = ctx, avatar, body
         self.decoded = decoded or avatar.decode()
         self.poser = GpuPoser(ctx, body.faces, body.skin_indices, body.skin_weights)
@@ -50,26 +49,7 @@ class AvatarRenderer:
 
     def render(self, params: dict, camera, background=(1.0, 1.0, 1.0)) -> np.ndarray:
         """Posed render as float32 [H, W, 3] (reads the image back)."""
-        from gma.render import read_outputs
-
         self.set_params(params)
         state = self.rasterizer.forward(self.surfels, camera, np.asarray(background, np.float32))
         return read_outputs(self.ctx, state).color
 
-
-def open_view_source(ctx, path):
-    """A ``gma.view.BodySource`` for the avatar file at ``path`` (what ``gma view avatar.gma`` opens)."""
-    from pathlib import Path
-
-    from gma.view.source import BodySource
-
-    avatar = Avatar.load(path)
-    from gma.body import load_body
-
-    body = load_body(avatar.body_name)
-    dec = avatar.decode()
-    src = BodySource(ctx, body, dec.binding, dec.colors.numpy(), dec.opacities.numpy(), name=Path(path).name,
-                     vertex_offsets=dec.vertex_offsets)
-    src.set_params({"shape": avatar.shape})
-    src.avatar, src.decoded = avatar, dec  # for the edit tools: features live on avatar.model
-    return src

@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.data.cameras import look_at
 from gma.render import Camera
+from gma.render.image_io import to_uint8
 
 __all__ = ["orbit_cameras", "write_video"]
 
@@ -26,8 +28,6 @@ def orbit_cameras(w2c: np.ndarray, K: np.ndarray, width: int, height: int, frame
         rel = eye0 - target
         # Rodrigues rotation of the eye about ``up``.
         rot = (rel * math.cos(a) + np.cross(up, rel) * math.sin(a) + up * np.dot(up, rel) * (1 - math.cos(a)))
-        from gma.data.cameras import look_at
-
         view = look_at(target + rot, target, up=up).astype(np.float32)
         out.append(Camera(view, np.asarray(K, np.float32), width, height))
     return out
@@ -36,8 +36,6 @@ def orbit_cameras(w2c: np.ndarray, K: np.ndarray, width: int, height: int, frame
 def write_video(path: str | Path, frames: list[np.ndarray], fps: float = 24.0) -> Path:
     """Write float [H, W, 3] frames as an H.264 MP4 (imageio-ffmpeg); falls back to a GIF beside it when
     ffmpeg is unavailable. Returns the written path."""
-    from gma.render.image_io import to_uint8
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     data = [to_uint8(f) for f in frames]

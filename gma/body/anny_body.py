@@ -6,15 +6,17 @@ Anny is Z-up, faces −Y, metres. Pose parameters are Anny's ``local-ref`` delta
 (bone 0 is the root and carries the global rotation and translation). Identity everywhere is Anny's rest
 pose — an A-pose with the root at the origin — which is also the canonical pose for editing.
 
-Creating the model is slow the first time (anny builds a ~1 GB cache under ``$ANNY_CACHE_DIR``,
-~75 s); later creations read that cache (~3 s), and within one process ``AnnyBody.create()`` returns
-the same object. Per frame, only forward kinematics runs (rest vertices and rest bone poses are cached
-for the last shape/expression).
+Creating the model is slow the first time: anny builds a ~1 GB cache under ``$ANNY_CACHE_DIR`` (by
+default ``~/.cache/gma/anny``, whichever way GMA is started), ~75 s; later creations read that cache
+(~3 s), and within one process ``AnnyBody.create()`` returns the same object. Per frame, only forward
+kinematics runs (rest vertices and rest bone poses are cached for the last shape/expression).
 """
 
 from __future__ import annotations
 
 import functools
+import os
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -48,8 +50,24 @@ def _anny_face_labels(model, faces: torch.Tensor) -> tuple[tuple[str, ...], torc
     return names, torch.from_numpy(labels)
 
 
+# One cache location whichever way GMA starts (make, a bare ``gma``, the tests), unless the user sets one.
+DEFAULT_ANNY_CACHE_DIR = Path.home() / ".cache" / "gma" / "anny"
+
+
+def _prepare_anny_import() -> None:
+    """Before anny is first imported: point its cache at GMA's default (anny reads the variable at import)
+    and quieten NVIDIA Warp, which anny imports and which prints a CUDA banner GMA has no use for."""
+    os.environ.setdefault("ANNY_CACHE_DIR", str(DEFAULT_ANNY_CACHE_DIR))
+    try:
+        import warp
+    except ImportError:  # anny without its optional Warp skinning
+        return
+    warp.config.quiet = True
+
+
 @functools.lru_cache(maxsize=4)
 def _create(rig: str, topology: str) -> AnnyBody:
+    _prepare_anny_import()
     import anny
 
     model = anny.Anny(

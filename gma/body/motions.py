@@ -20,6 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from gma.body.params import load_body as load_sequence_body
+from gma.body.registry import load_body
+
 __all__ = ["MOTIONS", "Motion", "axis_angle_to_matrix", "load_anny_motion", "motion"]
 
 MOTIONS = ("turn", "walk", "wave", "expressions")
@@ -166,8 +169,6 @@ def motion(name: str, frames: int = 120, body=None, fps: float = 30.0,
     if frames < 1:
         raise ValueError(f"a motion needs at least one frame, got {frames}")
     if body is None:
-        from gma.body.registry import load_body
-
         body = load_body("anny")
     if body.name != "anny":
         raise ValueError(f"built-in motions are for the Anny rig, not {body.name!r}")
@@ -191,9 +192,7 @@ def motion(name: str, frames: int = 120, body=None, fps: float = 30.0,
 def load_anny_motion(path: str | Path, fps: float = 30.0) -> Motion:
     """An Anny pose sequence from a sequence's ``body.npz`` (``model`` = "anny": ``pose`` [T, 104, 4, 4],
     ``phenotype`` [6], optional ``facial_actions`` [T, 52]); read without pickle, validated by
-    ``gma.data.body_params``."""
-    from gma.data.body_params import load_body as load_sequence_body
-
+    ``gma.body.params``."""
     seq = load_sequence_body(path)
     if seq.model != "anny":
         raise ValueError(f"{path}: holds {seq.model!r} body parameters, not an Anny pose sequence")

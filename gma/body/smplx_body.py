@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from gma.body.base import BodyModel, BodyParams, ParamSpace
+from gma.body.params import find_model_file
 from gma.body.parts import REGIONS, regions_from_bones
 from gma.body.skinning import dense_to_sparse_weights
 
@@ -87,8 +88,6 @@ def check_smplx_file(path: Path) -> dict[str, tuple[int, ...]]:
 def _find_file(smplx_dir: str | os.PathLike | None, gender: str) -> Path:
     if smplx_dir is not None and Path(smplx_dir).is_file():
         return Path(smplx_dir)
-    from gma.data.body_params import find_model_file
-
     return find_model_file("smplx", gender, smplx_dir)
 
 

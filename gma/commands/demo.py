@@ -32,12 +32,13 @@ def run(args: argparse.Namespace) -> int:
     from gma.avatar.posing import frame_params
     from gma.avatar.video import orbit_cameras, write_video
     from gma.body import load_body, motion
+    from gma.core.atomic import atomic_write_json
     from gma.data import read_sequence
-    from gma.data.atomic import atomic_write_json
-    from gma.data.synth.generate import SynthConfig, synthesize
     from gma.gpu import get_context
+    from gma.render.image_io import save_png
+    from gma.synth.generate import SynthConfig, synthesize
     from gma.train.config import preset
-    from gma.train.evaluate import evaluate, format_table
+    from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
     from gma.train.trainer import Trainer, work_dir
 
     out = Path(args.out)
@@ -66,12 +67,9 @@ def run(args: argparse.Namespace) -> int:
     times["fit_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    results = {}
-    for split in ("test_pose", "test_view"):
-        if seq.split(split):
-            r = evaluate(avatar, seq, split, out / "eval", cfg.resolution, cfg.background, body=body, ctx=ctx)
-            print(format_table(r))
-            results[split] = r["mean"]
+    evaluated = evaluate_splits(avatar, seq, EVAL_SPLITS, out / "eval", cfg.resolution, cfg.background,
+                                body=body, ctx=ctx)
+    results = {split: r["mean"] for split, r in evaluated.items() if split != "geometry"}
     times["eval_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -90,8 +88,6 @@ def run(args: argparse.Namespace) -> int:
     animation = write_video(out / f"novel_pose_{args.motion}.mp4", anim)
     # A test_pose frame as a still, for the summary.
     frame = seq.split("test_pose")[0] if seq.split("test_pose") else seq.split("train")[0]
-    from gma.render.image_io import save_png
-
     still = renderer.render(frame_params(seq.body.model, seq.body.frame(frame)), cam, bg)
     save_png(out / "novel_pose_still.png", still)
     times["video_s"] = time.perf_counter() - t0

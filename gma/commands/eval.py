@@ -25,21 +25,17 @@ def run(args: argparse.Namespace) -> int:
 
     from gma.avatar import Avatar
     from gma.data import read_sequence
-    from gma.data.atomic import atomic_write_json
-    from gma.train.evaluate import evaluate, format_table, geometry_metrics
+    from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
 
     avatar = Avatar.load(args.avatar)
     seq = read_sequence(args.sequence)
     out = Path(args.out) if args.out else Path(args.avatar).with_suffix(".eval")
     splits = [args.split]
     if args.split == "test" and not seq.split("test"):
-        splits = [s for s in ("test_pose", "test_view") if seq.split(s)]
-    for split in splits:
-        result = evaluate(avatar, seq, split, out, args.resolution, args.background, images=args.images)
-        print(format_table(result))
-    geometry = geometry_metrics(avatar, seq)
+        splits = list(EVAL_SPLITS)
+    results = evaluate_splits(avatar, seq, splits, out, args.resolution, args.background, images=args.images)
+    geometry = results["geometry"]
     if geometry is not None:  # synthetic sequences carry the true clothed mesh
-        atomic_write_json(out / "geometry.json", geometry)
         print("mesh layer vs ground-truth clothed mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in geometry.items()))
     print(f"wrote {out}")
     return 0

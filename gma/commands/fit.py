@@ -14,7 +14,7 @@ import argparse
 
 
 def register(subparsers) -> None:
-    from gma.train.cli_config import add_dataclass_options
+    from gma.commands._options import add_dataclass_options
     from gma.train.config import FitConfig
 
     p = subparsers.add_parser("fit", help="fit an avatar to a sequence", description=__doc__,
@@ -30,8 +30,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gma.commands._options import collect_overrides
     from gma.data import read_sequence
-    from gma.train.cli_config import collect_overrides
     from gma.train.config import preset
     from gma.train.trainer import Trainer, work_dir
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from gma.commands import parse_image_size
+from gma.core.args import parse_image_size
 
 
 def register(subparsers) -> None:

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from gma.commands import parse_image_size
+from gma.core.args import parse_image_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def framing_camera(means: np.ndarray, width: int, height: int):
     """A camera looking at the centre of ``means`` along +z from far enough to see them all."""
-    from gma.render.camera import Camera
+    from gma.core.camera import Camera
 
     lo, hi = np.percentile(means, 1, axis=0), np.percentile(means, 99, axis=0)
     centre = (lo + hi) / 2
@@ -38,8 +38,8 @@ def framing_camera(means: np.ndarray, width: int, height: int):
 def run(args: argparse.Namespace) -> int:
     import torch
 
+    from gma.core.camera import Camera
     from gma.render import rasterize
-    from gma.render.camera import Camera
     from gma.render.image_io import save_png
     from gma.render.ply import load_splat_ply
 

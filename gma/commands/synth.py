@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import argparse
 
-from gma.commands import parse_image_size
+from gma.core.args import parse_image_size
 
 
 def _run(args: argparse.Namespace) -> int:
     import time
 
-    from gma.data.synth.generate import SynthConfig, synthesize
+    from gma.synth.generate import SynthConfig, synthesize
 
     w, h = args.size
     cfg = SynthConfig(

@@ -9,10 +9,10 @@ What the fitting code calls::
         rgb = seq.image(i)                      # uint8 [H, W, 3]
         alpha = seq.mask(i)                     # float32 [H, W] in [0, 1]
         K, w2c = seq.cameras.frame(i)           # [3, 3], [4, 4] OpenCV world->camera
-        params = seq.body.frame(i)              # dict of arrays, see gma.data.body_params
+        params = seq.body.frame(i)              # dict of arrays, see gma.body.params
 """
 
-from gma.data.body_params import BODY_MODELS, SequenceBody, find_model_file, load_body, save_body
+from gma.body.params import BODY_MODELS, SequenceBody, find_model_file, load_body, save_body
 from gma.data.cameras import Cameras, load_cameras, look_at, save_cameras
 from gma.data.sequence import SPLIT_KEYS, Sequence, SequenceWriter, read_sequence
 

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.data.atomic import atomic_write_json
-from gma.render.camera import look_at_w2c as look_at  # one camera convention for the project
+from gma.core.atomic import atomic_write_json
+from gma.core.camera import look_at_w2c as look_at  # one camera convention for the project
 
 __all__ = ["Cameras", "load_cameras", "save_cameras", "look_at"]
 

@@ -7,7 +7,7 @@
     masks/000000.png …    optional when images are RGBA; 0 = background, 255 = person (soft values =
                           partial coverage at the silhouette edge)
     cameras.json          see gma.data.cameras
-    body.npz              see gma.data.body_params
+    body.npz              see gma.body.params
     splits.json           optional; see SPLIT_KEYS
 
 ``splits.json`` maps split names to frame indices. Known names: ``train`` (fit on these), ``test``
@@ -28,8 +28,8 @@ import imageio.v3 as iio
 import numpy as np
 from PIL import Image
 
-from gma.data.atomic import atomic_dir, atomic_write_json
-from gma.data.body_params import SequenceBody, load_body, require_body_model, save_body
+from gma.body.params import SequenceBody, load_body, require_body_model, save_body
+from gma.core.atomic import atomic_dir, atomic_write_json
 from gma.data.cameras import Cameras, load_cameras, save_cameras, validate_cameras
 
 __all__ = ["SPLIT_KEYS", "Sequence", "SequenceWriter", "read_sequence"]

@@ -10,6 +10,8 @@ import os
 
 import wgpu
 
+from gma.core.errors import DeviceError
+
 # Explicit graphics APIs beat the GL compatibility path, which lacks storage buffers in many places.
 _BACKEND_RANK = {"Vulkan": 0, "Metal": 0, "D3D12": 0, "DX12": 0, "OpenGL": 2, "GL": 2}
 _TYPE_RANK = {"DiscreteGPU": 0, "IntegratedGPU": 1, "VirtualGPU": 2, "Unknown": 3, "CPU": 4}
@@ -22,7 +24,7 @@ INSTALL_HINT = (
 )
 
 
-class NoAdapterError(RuntimeError):
+class NoAdapterError(DeviceError):
     """Raised when no adapter matches; the message says how to install a driver."""
 
 

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from gma.core.camera import Camera
 from gma.gpu import GpuContext, get_context
-from gma.render.camera import Camera
 from gma.render.rasterizer import SurfelRasterizer, read_outputs
 from gma.render.surfels import SurfelBuffers
 from gma.render.validate import check_background, check_camera, check_surfels

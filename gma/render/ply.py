@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.render.scenes import quat_multiply
+
 SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic constant
 REQUIRED = ("x", "y", "z", "rot_0", "rot_1", "rot_2", "rot_3", "opacity", "scale_0", "scale_1")
 
@@ -56,8 +58,6 @@ def _read_header(fh, path: Path) -> tuple[str, int, list[tuple[str, str]]]:
 def _rotate_to_drop_axis(quats: np.ndarray, drop: np.ndarray) -> np.ndarray:
     """Quaternion whose z axis is the original axis ``drop`` (0, 1 or 2) and whose x, y axes are the
     other two, keeping a right-handed frame (cyclic permutation of the columns)."""
-    from gma.render.scenes import quat_multiply
-
     # Rotations that map the local z axis onto x (drop 0) or y (drop 1), as cyclic axis permutations.
     perm = {0: np.array([0.5, 0.5, 0.5, 0.5]), 1: np.array([0.5, -0.5, -0.5, -0.5])}
     out = quats.copy()

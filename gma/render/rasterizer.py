@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import wgpu
 
+from gma.core.camera import Camera
 from gma.gpu import GpuContext, PassTimer
 from gma.gpu.context import STORAGE
 from gma.gpu.workspace import Workspace
-from gma.render.camera import Camera
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
 from gma.render.layouts import render_params, tile_grid

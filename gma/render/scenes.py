@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from gma.render.camera import Camera
+from gma.core.camera import Camera
 
 
 def random_scene(n: int, seed: int = 0, channels: int = 3, depth: float = 4.0, spread: float = 1.0,

@@ -7,8 +7,10 @@ import json
 from pathlib import Path
 
 import torch
+from safetensors import safe_open
+from safetensors.torch import load_file, save
 
-from gma.data.atomic import atomic_write_bytes
+from gma.core.atomic import atomic_write_bytes
 
 __all__ = ["load_checkpoint", "save_checkpoint"]
 
@@ -30,8 +32,6 @@ def _unique_state(model: torch.nn.Module) -> tuple[dict[str, torch.Tensor], dict
 
 def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.Optimizer, meta: dict) -> None:
     """Write model parameters, the optimiser's per-parameter state and ``meta`` (JSON-able) atomically."""
-    from safetensors.torch import save
-
     tensors = {f"model.{k}": v.detach().contiguous() for k, v in _unique_state(model)[0].items()}
     state = optimizer.state_dict()
     for pid, st in state["state"].items():
@@ -46,8 +46,6 @@ def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.O
 def load_checkpoint(path: Path, model: torch.nn.Module, optimizer_factory) -> tuple[torch.optim.Optimizer, dict]:
     """Restore ``model`` from ``path``; ``optimizer_factory(meta)`` builds the optimiser of the stage the
     checkpoint was in, whose state is then restored. Returns (optimizer, meta)."""
-    from safetensors import safe_open
-    from safetensors.torch import load_file
 
     try:
         tensors = load_file(str(path))

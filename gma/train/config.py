@@ -1,4 +1,4 @@
-"""Fitting configuration as dataclasses (the CLI is built from them, see ``gma.train.cli_config``),
+"""Fitting configuration as dataclasses (the CLI is built from them, see ``gma.commands._options``),
 and the quick / full presets."""
 
 from __future__ import annotations

@@ -10,13 +10,19 @@ import numpy as np
 import torch
 
 from gma.avatar.avatar import Avatar
-from gma.data.atomic import atomic_write_json
+from gma.body import load_body
+from gma.core.atomic import atomic_write_json
+from gma.render.image_io import save_png
+from gma.synth.generate import gt_mesh
 from gma.train.data import load_frames
 from gma.train.losses import GeometryTerms, load_lpips
 from gma.train.metrics import psnr, ssim
 from gma.train.render_step import render_frame
 
-__all__ = ["evaluate", "format_table", "geometry_metrics"]
+__all__ = ["EVAL_SPLITS", "evaluate", "evaluate_splits", "format_table", "geometry_metrics"]
+
+# The held-out splits of a synthetic or imported sequence: novel poses and novel views.
+EVAL_SPLITS = ("test_pose", "test_view")
 
 
 def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None, resolution: int = 512,
@@ -24,8 +30,6 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
     ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim[, lpips]}], "mean": {...}}."""
-    from gma.body import load_body
-    from gma.render.image_io import save_png
 
     body = body or load_body(avatar.body_name)
     frames = load_frames(seq, body, split, resolution)
@@ -56,6 +60,29 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     return result
 
 
+def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path | None = None,
+                    resolution: int = 512, background: float = 0.5, body=None, ctx=None, images: int = 4,
+                    report=print) -> dict:
+    """The one evaluation loop of ``gma eval``, ``gma demo`` and the benchmarks: :func:`evaluate` on each
+    of ``splits`` that ``seq`` has (``report`` gets each table), then the mesh layer's geometry scores
+    when the sequence has a ground-truth mesh (written to ``out_dir/geometry.json``).
+
+    Returns {split: result of :func:`evaluate`} plus "geometry": dict or None."""
+    results: dict = {}
+    for split in splits:
+        if not seq.split(split):
+            continue
+        results[split] = evaluate(avatar, seq, split, out_dir, resolution, background, body=body, ctx=ctx,
+                                  images=images)
+        if report is not None:
+            report(format_table(results[split]))
+    geometry = geometry_metrics(avatar, seq)
+    if geometry is not None and out_dir is not None:
+        atomic_write_json(Path(out_dir) / "geometry.json", geometry)
+    results["geometry"] = geometry
+    return results
+
+
 def geometry_metrics(avatar: Avatar, seq) -> dict | None:
     """How well the mesh layer recovered the clothed shape, on sequences with a ground-truth mesh
     (synthetic ones; None otherwise). The avatar's morphed canonical mesh and the ground truth share the
@@ -65,8 +92,6 @@ def geometry_metrics(avatar: Avatar, seq) -> dict | None:
     vertices the clothing moves (> 2 mm); body_mm / body_clothed_mm: the same for the unmorphed body
     (where the mesh layer started); roughness_mm: RMS of the umbrella Laplacian of the morph (a noisy
     mesh layer scores high); the ground truth's is ``gt_roughness_mm``."""
-    from gma.data.synth.generate import gt_mesh
-
     try:
         truth = gt_mesh(seq.root)
     except FileNotFoundError:

@@ -19,7 +19,10 @@ import torch
 from tqdm import tqdm
 
 from gma.avatar.avatar import Avatar
-from gma.data.atomic import atomic_write_json
+from gma.avatar.decoders import load_decoders, save_decoders
+from gma.body import load_body
+from gma.core.atomic import atomic_write_json
+from gma.render.image_io import save_png
 from gma.train.checkpoint import load_checkpoint, save_checkpoint
 from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
@@ -97,8 +100,6 @@ class Trainer:
     def __init__(self, cfg: FitConfig, seq, out: str | Path, body=None, ctx=None, progress: bool = True):
         from torch import nn
 
-        from gma.body import load_body
-
         seqs = list(seq) if isinstance(seq, (list, tuple)) else [seq]
         if not seqs:
             raise ValueError("no sequence to fit")
@@ -123,8 +124,6 @@ class Trainer:
         self.net = self.model if len(self.models) == 1 else nn.ModuleList(self.models)
         self.frozen_decoders = False
         if cfg.decoders:
-            from gma.avatar.decoders import load_decoders
-
             state = load_decoders(cfg.decoders, cfg.avatar)
             unexpected = self.model.load_state_dict(state, strict=False).unexpected_keys
             if unexpected:
@@ -210,8 +209,6 @@ class Trainer:
         return loss, rec, marks
 
     def _preview(self, step: int) -> None:
-        from gma.render.image_io import save_png
-
         with torch.no_grad():
             total = sum(s.steps for s in self.stages)
             layer = self.stages[self._locate(min(step, total) - 1)[0]].layer if step > 0 else self.stages[0].layer
@@ -296,8 +293,6 @@ class Trainer:
                 sub.avatar.info["decoders_shared_with"] = shared
             sub.avatar.save(sub.out)
         if shared:
-            from gma.avatar.decoders import save_decoders
-
             save_decoders(self.out / "decoders.gma", self.model,
                           {"sequences": [str(s.seq.root) for s in self.subjects], "steps": total})
         n = max(1, self.timed_steps)

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from gma.data.atomic import atomic_write_npz
+from gma.core.atomic import atomic_write_npz
+from gma.core.errors import GmaError
 
 __all__ = ["Detections", "MissingExtraError", "detect_frames", "require_mediapipe"]
 
@@ -30,7 +31,7 @@ NUM_HAND = 21
 _CACHE_VERSION = 1
 
 
-class MissingExtraError(ImportError):
+class MissingExtraError(GmaError, ImportError):
     """The optional video extra is not installed."""
 
 

@@ -28,6 +28,7 @@ import torch
 from tqdm import tqdm
 
 from gma.video.camera import CAMERA_FROM_WORLD
+from gma.video.landmarks import POSE_POINTS
 from gma.video.rig import AnnyRig
 from gma.video.silhouette import SilhouetteRenderer, crop_box
 from gma.video.targets import FitTargets
@@ -88,8 +89,6 @@ def _kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _initial_root(rig: AnnyRig, rest, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray):
     """Per-frame root rotation vectors [T, 3] and translations [T, 3] (world): orientation from the 3D
     torso landmarks, position by linear least squares on the 2D landmarks."""
-    from gma.video.landmarks import POSE_POINTS
-
     zero = torch.zeros(1, len(rig.fit_bones), 3)
     base = rig.points(rig.transforms(rig.pose_matrices(zero, torch.zeros(1, 3)), rest), rest)[0].numpy()
     h0 = rest.rest_heads[0].numpy()

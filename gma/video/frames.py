@@ -8,10 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.errors import InputError
+from gma.data.importers._common import frame_range
+from gma.data.importers.video import read_frames
+
 __all__ = ["VideoError", "read_video"]
 
 
-class VideoError(ValueError):
+class VideoError(InputError):
     """A video that cannot be used; the message names the file and the problem."""
 
 
@@ -23,9 +27,6 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
     (mp4, mov, webm, gif, ...). ``max_frames`` guards memory: more selected frames is an error that
     suggests ``--skip``/``--end``.
     """
-    from gma.data.importers._common import frame_range
-    from gma.data.importers.video import _read_frames
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: video not found")
@@ -33,9 +34,9 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
         raise VideoError(f"{path}: the file is empty")
     frames = []
     try:
-        for img in _read_frames(path, False):
+        for img in read_frames(path, False):
             frames.append(img.copy())
-    except ValueError as exc:  # raised by _read_frames when ffmpeg cannot open the file
+    except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file
         raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
                          f"(ffmpeg: {_last_line(exc)})") from exc
     except (OSError, RuntimeError) as exc:

@@ -20,10 +20,21 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.data.atomic import atomic_write_npz
-from gma.data.body_params import SequenceBody
+from gma.body import load_body
+from gma.body.params import SequenceBody
+from gma.body.params import load_body as load_body_params
+from gma.core.atomic import atomic_write_json, atomic_write_npz
+from gma.data.importers._common import mask_from_array, write_imported
+from gma.data.importers.video import count_frames
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence
-from gma.video.fit import FitConfig
+from gma.video.camera import intrinsics, static_camera
+from gma.video.detect import detect_frames
+from gma.video.fit import FitConfig, fit_body
+from gma.video.frames import read_video
+from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
+from gma.video.rig import AnnyRig
+from gma.video.swaps import apply_swaps, resolve_swaps
+from gma.video.targets import build_targets
 
 __all__ = ["VideoImportConfig", "estimate_sequence", "work_dir"]
 
@@ -52,8 +63,6 @@ def work_dir(out: str | os.PathLike) -> Path:
 
 def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, int]) -> np.ndarray:
     import imageio.v3 as iio
-
-    from gma.data.importers._common import mask_from_array
 
     files = sorted(p for p in Path(mask_dir).glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if len(files) != n:
@@ -85,10 +94,6 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     user's ``body.npz`` (Anny, all or the selected frames) instead of the fit. ``anny``: an
     ``AnnyBody`` to reuse (tests create one per session).
     """
-    from gma.data.importers._common import write_imported
-    from gma.video.camera import intrinsics, static_camera
-    from gma.video.detect import detect_frames
-    from gma.video.frames import read_video
 
     cfg = config or VideoImportConfig()
     src, out = Path(src), Path(out)
@@ -133,8 +138,6 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     def extra(writer) -> None:
         import imageio.v3 as iio
 
-        from gma.data.atomic import atomic_write_json
-
         atomic_write_json(writer.path(REPORT_NAME), report)
         iio.imwrite(writer.path(SHEET_NAME), sheet)
 
@@ -146,15 +149,11 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
 
 
 def _count(src: Path) -> int:
-    from gma.data.importers.video import count_frames
-
     return count_frames(src)
 
 
 def _user_body(body, idx: list[int], src: Path) -> tuple[np.ndarray, np.ndarray]:
-    from gma.data.body_params import load_body
-
-    params = load_body(body)
+    params = load_body_params(body)
     if params.model != "anny":
         raise ValueError(f"{body}: the video pipeline writes Anny sequences; this file holds {params.model!r} "
                          "(give --camera and a mask source to import it as is)")
@@ -169,10 +168,6 @@ def _user_body(body, idx: list[int], src: Path) -> tuple[np.ndarray, np.ndarray]
 
 
 def _fit(det, masks, K, cfg: VideoImportConfig, work: Path, anny, progress: bool, timings: dict):
-    from gma.video.fit import fit_body
-    from gma.video.rig import AnnyRig
-    from gma.video.swaps import apply_swaps, resolve_swaps
-    from gma.video.targets import build_targets
 
     t0 = time.perf_counter()
     swaps = resolve_swaps(det.pose3d, det.found, det.face)
@@ -180,8 +175,6 @@ def _fit(det, masks, K, cfg: VideoImportConfig, work: Path, anny, progress: bool
     key = _fit_key(det, K, cfg.fit) + hashlib.sha1(np.ascontiguousarray(masks).tobytes()).hexdigest()[:8]
     cache = work / f"fit_{key}.npz"
     if anny is None:
-        from gma.body import load_body
-
         anny = load_body("anny")
     rig = AnnyRig(anny, fit_hands=cfg.fit.fit_hands)
     tg = build_targets(rig.point_names, p2, p3, h2, det.found, use_hands=cfg.fit.fit_hands)
@@ -206,11 +199,7 @@ def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_inf
             anny) -> tuple[dict, np.ndarray]:
     import torch
 
-    from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
-
     if anny is None:
-        from gma.body import load_body
-
         anny = load_body("anny")
     T, H, W = frames.shape[:3]
     K, w2c = cams.frame(0)

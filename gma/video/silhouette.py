@@ -17,6 +17,8 @@ import roma
 import torch
 from PIL import Image
 
+from gma.render import rasterize, rasterize_reference
+
 __all__ = ["SilhouetteRenderer", "crop_box"]
 
 
@@ -24,8 +26,6 @@ __all__ = ["SilhouetteRenderer", "crop_box"]
 def _wgsl_is_differentiable() -> bool:
     """Whether ``gma.render.rasterize`` returns an alpha that autograd reaches the means through."""
     try:
-        from gma.render import rasterize
-
         means = torch.tensor([[0.0, 0.0, 2.0]], requires_grad=True)
         out = rasterize(means, torch.tensor([[1.0, 0, 0, 0]]), torch.full((1, 2), 0.2), torch.tensor([0.9]),
                         torch.ones(1, 3), torch.eye(4), torch.tensor([[8.0, 0, 4], [0, 8, 4], [0, 0, 1]]), 8, 8)
@@ -91,11 +91,7 @@ class SilhouetteRenderer:
         opac = torch.full((len(centre),), 0.95)
         colors = torch.ones(len(centre), 1)
         if self.use_wgsl:
-            from gma.render import rasterize
-
             return rasterize(centre, quats, scale, opac, colors, w2c, Kc, self.size, self.size).alpha[..., 0]
-        from gma.render import rasterize_reference
-
         out = rasterize_reference(centre, quats, scale, opac, colors, w2c, Kc, self.size, self.size,
                                   pixel_chunk=1024)
         return out["alpha"][..., 0]

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import torch
 
+from gma.body.motions import MOTIONS, axis_angle_to_matrix, load_anny_motion, motion
 from gma.view.source import BodySource
 
 __all__ = ["BodyControls", "load_motion"]
@@ -26,8 +27,6 @@ _THUMB = re.compile(r"^finger1-[23]\.(L|R)$")
 
 def load_motion(spec: str, body, frames: int = 120):
     """A pose sequence: a built-in motion name (``walk``, ...) or a ``body.npz`` / sequence directory."""
-    from gma.body.motions import MOTIONS, load_anny_motion, motion
-
     if spec in MOTIONS:
         return motion(spec, frames, body)
     path = Path(spec)
@@ -121,8 +120,6 @@ class BodyControls:
         """[T, J, 4, 4] local-ref pose deltas of the sequence (T = 1 for the canonical pose), hands applied."""
         body = self.source.body
         pose = self.motion.pose.clone() if self.motion is not None else body.canonical_pose()[None].clone()
-        from gma.body.motions import axis_angle_to_matrix
-
         for bone, side in self._fingers:
             curl = self.hand_curl[0 if side == "L" else 1]
             if curl <= 0:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gma.render.camera import Camera
+from gma.core.camera import Camera
 
 __all__ = ["CameraPath", "OrbitCamera"]
 

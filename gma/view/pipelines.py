@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import wgpu
 
+from gma.core.camera import Camera
 from gma.gpu import GpuContext
-from gma.render.camera import Camera
 
 __all__ = ["DEPTH_FORMAT", "ViewerPipelines", "clip_matrix"]
 

@@ -6,15 +6,14 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.render.camera import Camera
+from gma.core.camera import Camera
+from gma.data.cameras import load_cameras
 
 __all__ = ["sequence_cameras"]
 
 
 def sequence_cameras(seq_dir: str | Path, limit: int = 16) -> list[Camera]:
     """Up to ``limit`` distinct cameras of a sequence (evenly spaced over its frames when they move)."""
-    from gma.data.cameras import load_cameras
-
     path = Path(seq_dir)
     path = path / "cameras.json" if path.is_dir() else path
     cams = load_cameras(path)

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import wgpu
 
+from gma.core.camera import Camera
 from gma.gpu import GpuContext
-from gma.render.camera import Camera
 from gma.render.rasterizer import SurfelRasterizer
 from gma.view.pipelines import DEPTH_FORMAT, ViewerPipelines, clip_matrix
 from gma.view.source import SurfelSource

@@ -19,7 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.render.camera import Camera
+from gma.core.atomic import atomic_write_json
+from gma.core.camera import Camera
 
 __all__ = ["SelectionFile", "face_centres_on_screen", "faces_in_box", "faces_in_lasso", "load_selection",
            "points_in_polygon", "save_selection"]
@@ -97,8 +98,6 @@ class SelectionFile:
 
 def save_selection(path: str | Path, face_ids, body_model: str, num_faces: int) -> None:
     """Write the selection as JSON, atomically (a crash leaves the old file or the new one)."""
-    from gma.data.atomic import atomic_write_json
-
     ids = np.unique(np.asarray(face_ids, np.int64))
     if len(ids) and (ids[0] < 0 or ids[-1] >= num_faces):
         raise ValueError(f"selection holds face ids outside [0, {num_faces})")

@@ -1,16 +1,16 @@
 """What the viewer draws: a *surfel source* owns the renderer's input buffers and, for body-bound
 sources, the posed mesh the overlays and the selection use.
 
-Two sources exist now, and one adapter for the avatar engineer:
+Two sources exist, and one adapter for fitted avatars:
 
 - :class:`StaticSource`: fixed surfels (a splat PLY); no body, no mesh, no posing.
 - :class:`BodySource`: surfels bound to a body mesh (placeholder surfels now, a fitted avatar's decoded
   surfels later). Per frame only the [J, 4, 4] bone transforms go to the GPU, where ``GpuPoser`` skins
   the mesh and places the surfels straight into :class:`SurfelBuffers` (no readback). Shape and
   expression changes re-upload the rest vertices ([V, 3], a few hundred kB) once per change.
-- ``.gma`` avatars: :func:`load_source` calls ``gma.avatar.open_view_source(ctx, path) -> BodySource``
-  when that function exists (build the BodySource with the avatar's binding, colours, opacities and
-  per-vertex morph offsets); until then it raises a clear error.
+- ``.gma`` avatars: :func:`avatar_source` builds a :class:`BodySource` from the avatar's decoded
+  binding, colours, opacities and per-vertex morph offsets, at the avatar's own body shape. It lives on
+  the view side because the view layer sits above the avatar layer (gma.avatar knows nothing of views).
 """
 
 from __future__ import annotations
@@ -23,10 +23,17 @@ from typing import Protocol
 import numpy as np
 import torch
 
+from gma.avatar import Avatar
+from gma.body import load_body
+from gma.body.gpu_posing import GpuPoser
+from gma.body.placement import SurfelBinding, uniform_surfels
+from gma.body.skinning import linear_blend_skinning
 from gma.gpu import GpuContext
+from gma.render.ply import load_splat_ply
 from gma.render.surfels import SurfelBuffers
 
-__all__ = ["BodySource", "MeshLayer", "StaticSource", "SurfelSource", "load_source", "placeholder_surfels"]
+__all__ = ["BodySource", "MeshLayer", "StaticSource", "SurfelSource", "avatar_source", "load_source",
+           "placeholder_surfels"]
 
 # Distinct, readable colours for the fine part labels of placeholder surfels (cycled when more labels).
 _PALETTE = np.array([
@@ -94,8 +101,6 @@ class StaticSource:
 def placeholder_surfels(body, count: int, seed: int = 0):
     """(binding, colours [N, 3], opacities [N]) for ``count`` surfels spread over the body's faces,
     coloured by fine part label: something to look at (and benchmark) before a fitted avatar exists."""
-    from gma.body.placement import SurfelBinding, uniform_surfels
-
     nf = body.num_faces
     per_face = max(1, math.ceil(count / nf))
     b = uniform_surfels(nf, per_face, scale=0.55 / math.sqrt(per_face) * 1.3, seed=seed)
@@ -117,8 +122,6 @@ class BodySource:
 
     def __init__(self, ctx: GpuContext, body, binding, colors, opacities, name: str = "body",
                  vertex_offsets=None):
-        from gma.body.gpu_posing import GpuPoser
-
         self.ctx, self.body, self.name = ctx, body, name
         self.up_axis = body.up_axis
         self.binding = binding
@@ -198,8 +201,6 @@ class BodySource:
     def posed_vertices(self) -> np.ndarray:
         """[V, 3] posed vertices of the current parameters, computed in torch on the CPU (for a user
         action such as a selection; the frame loop never calls this)."""
-        from gma.body.skinning import linear_blend_skinning
-
         with torch.no_grad():
             v = linear_blend_skinning(self._rest, self.body.skin_indices, self.body.skin_weights, self._transforms)
         return v.numpy()
@@ -226,24 +227,27 @@ def load_source(ctx: GpuContext, spec: str, surfels: int = 50_000) -> SurfelSour
     """Open ``spec``: ``body:anny`` / ``body:smplx`` (the body with ``surfels`` placeholder surfels),
     a splat ``.ply``, or a fitted avatar ``.gma``. Raises FileNotFoundError / ValueError naming the file."""
     if spec.startswith("body:"):
-        from gma.body import load_body
-
         return BodySource.placeholder(ctx, load_body(spec.split(":", 1)[1]), surfels)
     path = Path(spec)
     if not path.exists():
         raise FileNotFoundError(f"{path} does not exist (expected a .gma avatar, a splat .ply, or body:anny)")
     suffix = path.suffix.lower()
     if suffix == ".ply":
-        from gma.render.ply import load_splat_ply
-
         return StaticSource(ctx, load_splat_ply(path), name=path.name)
     if suffix == ".gma":
-        try:
-            from gma.avatar import open_view_source  # the avatar engineer's adapter (see module doc)
-        except ImportError:
-            raise ValueError(
-                f"{path}: viewing fitted avatars (.gma) needs gma.avatar.open_view_source, which this "
-                "version does not have yet; try a splat .ply or body:anny"
-            ) from None
-        return open_view_source(ctx, path)
+        return avatar_source(ctx, path)
     raise ValueError(f"{path}: unknown source format {suffix!r}; expected .gma, .ply or body:anny")
+
+
+def avatar_source(ctx: GpuContext, path) -> BodySource:
+    """A :class:`BodySource` showing the avatar file at ``path`` (what ``gma view avatar.gma`` opens), posed
+    at the avatar's own body shape. ``source.avatar`` and ``source.decoded`` keep the features and the
+    decoded surfels for the edit tools."""
+    avatar = Avatar.load(path)
+    body = load_body(avatar.body_name)
+    dec = avatar.decode()
+    src = BodySource(ctx, body, dec.binding, dec.colors.numpy(), dec.opacities.numpy(), name=Path(path).name,
+                     vertex_offsets=dec.vertex_offsets)
+    src.set_params({"shape": avatar.shape})
+    src.avatar, src.decoded = avatar, dec
+    return src

@@ -12,7 +12,7 @@ import numpy as np
 from PIL import Image
 from tqdm import tqdm
 
-from gma.data.body_params import SequenceBody, _RestrictedUnpickler
+from gma.body.params import RestrictedUnpickler, SequenceBody
 from gma.data.cameras import Cameras
 from gma.data.sequence import Sequence, SequenceWriter
 
@@ -42,7 +42,7 @@ def load_npy_safely(path: str | os.PathLike):
             f.seek(0)
             return np.load(f, allow_pickle=False)
         try:
-            arr = _RestrictedUnpickler(f, encoding="latin1").load()
+            arr = RestrictedUnpickler(f, encoding="latin1").load()
         except Exception as exc:
             raise ValueError(f"{path}: cannot be read safely ({exc})") from exc
     arr = np.asarray(arr, dtype=object)

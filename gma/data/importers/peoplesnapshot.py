@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.data.body_params import SequenceBody, find_model_file
+from gma.body.params import SequenceBody, find_model_file
 from gma.data.cameras import Cameras
 from gma.data.importers._common import frame_range, mask_from_array, read_rgb, write_imported
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence

@@ -19,7 +19,7 @@ import imageio.v3 as iio
 import imageio_ffmpeg
 import numpy as np
 
-from gma.data.body_params import load_body, require_body_model
+from gma.body.params import load_body, require_body_model
 from gma.data.cameras import load_cameras
 from gma.data.importers._common import frame_range, mask_from_array, write_imported
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence
@@ -29,10 +29,10 @@ __all__ = ["count_frames", "import_video"]
 
 def count_frames(path: str | os.PathLike) -> int:
     """Number of frames in a video file (decodes it once: container frame counts are unreliable)."""
-    return sum(1 for _ in _read_frames(path, False))
+    return sum(1 for _ in read_frames(path, False))
 
 
-def _read_frames(path, alpha: bool) -> Iterator[np.ndarray]:
+def read_frames(path, alpha: bool) -> Iterator[np.ndarray]:
     """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg."""
     channels = 4 if alpha else 3
     try:
@@ -109,8 +109,8 @@ def import_video(
     wanted = set(idx)
 
     def frames():
-        masks = _read_frames(mask_video, False) if mask_video is not None else None
-        for i, img in enumerate(_read_frames(src, alpha)):
+        masks = read_frames(mask_video, False) if mask_video is not None else None
+        for i, img in enumerate(read_frames(src, alpha)):
             m = next(masks) if masks is not None else None
             if i not in wanted:
                 continue

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from gma.data.body_params import SequenceBody, find_model_file, restricted_pickle_load
+from gma.body.params import SequenceBody, find_model_file, restricted_pickle_load
 from gma.data.cameras import Cameras
 from gma.data.importers._common import read_rgb, write_imported
 from gma.data.sequence import Sequence

@@ -25,7 +25,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 
-from gma.data.body_params import SequenceBody, find_model_file, load_smpl_model_arrays, smpl_root_joint
+from gma.body.params import SequenceBody, find_model_file, load_smpl_model_arrays, smpl_root_joint
 from gma.data.cameras import Cameras
 from gma.data.importers._common import frame_range, load_npy_safely, read_rgb, write_imported
 from gma.data.sequence import Sequence

@@ -1,5 +1,5 @@
-"""Helpers of the fit benchmarks (benchmarks/fit_presets.py, ablations.py): get (or synthesise) a
-sequence, fit one variant, evaluate it."""
+"""Helpers of the fit benchmarks (fit_presets.py, ablations.py, shared_decoders.py): get (or synthesise) a
+sequence, fit one variant, evaluate it with the same loop as ``gma eval``."""
 
 from __future__ import annotations
 
@@ -7,11 +7,14 @@ import json
 import time
 from pathlib import Path
 
+from gma.data import read_sequence
+from gma.synth.generate import SynthConfig, synthesize
+from gma.train.config import preset
+from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
+from gma.train.trainer import Trainer, work_dir
+
 
 def sequence(path: str, seed: int = 0, size: int = 512):
-    from gma.data import read_sequence
-    from gma.data.synth.generate import SynthConfig, synthesize
-
     p = Path(path)
     if (p / "splits.json").is_file():
         return read_sequence(p)
@@ -21,9 +24,6 @@ def sequence(path: str, seed: int = 0, size: int = 512):
 def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: int | None = None,
                  **overrides) -> dict:
     """Fit ``preset_name`` with ``overrides`` into ``out``, evaluate test_pose and test_view; a dict row."""
-    from gma.train.config import preset
-    from gma.train.trainer import Trainer, work_dir
-
     cfg = preset(preset_name, **overrides)
     t0 = time.perf_counter()
     avatar = Trainer(cfg, seq, out, body=body, ctx=ctx).run(resume=True)
@@ -40,13 +40,9 @@ def fit_and_eval(seq, out: Path, preset_name: str, body, ctx, eval_resolution: i
 def evaluate_row(avatar, seq, eval_dir: Path, resolution: int, background: float, body, ctx) -> dict:
     """Mean metrics of ``avatar`` on test_pose and test_view (images in ``eval_dir``), and the geometry
     scores when ``seq`` has a ground-truth mesh: {"test_pose": {...}, "test_view": {...}[, "geometry"]}."""
-    from gma.train.evaluate import evaluate, geometry_metrics
-
-    row = {}
-    for split in ("test_pose", "test_view"):
-        r = evaluate(avatar, seq, split, eval_dir, resolution, background, body=body, ctx=ctx)
-        row[split] = {k: round(v, 4) for k, v in r["mean"].items()}
-    geometry = geometry_metrics(avatar, seq)
-    if geometry is not None:
-        row["geometry"] = {k: round(v, 2) for k, v in geometry.items()}
+    results = evaluate_splits(avatar, seq, EVAL_SPLITS, eval_dir, resolution, background, body=body, ctx=ctx,
+                              report=None)
+    row = {split: {k: round(v, 4) for k, v in r["mean"].items()} for split, r in results.items() if split != "geometry"}
+    if results["geometry"] is not None:
+        row["geometry"] = {k: round(v, 2) for k, v in results["geometry"].items()}
     return row

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gma.body.motions import motion
 from gma.data.cameras import look_at
 
 __all__ = ["PRESETS", "Shots", "make_shots"]
@@ -83,8 +84,6 @@ def make_shots(
     rng: np.random.Generator,
 ) -> Shots:
     """Poses and cameras of ``preset`` for the Anny ``body`` (for bone and facial action names)."""
-    from gma.body.motions import motion
-
     if preset not in PRESETS:
         raise ValueError(f"unknown synth preset {preset!r}; choose one of {', '.join(PRESETS)}")
     if n_train < 1 or n_pose < 0 or n_view < 0:

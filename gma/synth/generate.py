@@ -25,11 +25,15 @@ import imageio.v3 as iio
 import numpy as np
 from tqdm import tqdm
 
-from gma.data.atomic import atomic_write_json
-from gma.data.body_params import SequenceBody
+from gma.body import load_body
+from gma.body.params import SequenceBody
+from gma.core.atomic import atomic_write_json
 from gma.data.cameras import Cameras
 from gma.data.sequence import Sequence, SequenceWriter
-from gma.data.synth.garments import GARMENTS
+from gma.gpu import get_context
+from gma.synth.garments import GARMENTS
+from gma.synth.person import make_person
+from gma.synth.presets import make_shots
 
 __all__ = ["SynthConfig", "gt_mesh", "synthesize"]
 
@@ -63,17 +67,12 @@ def synthesize(
     ``ctx`` is the GpuContext (default: ``gma.gpu.get_context()``); ``body`` the Anny body
     (default: ``gma.body.load_body("anny")``), passed in by tests so that it is created once.
     """
-    from gma.body import load_body
-    from gma.data.synth.mesh_raster import MeshRasterizer
-    from gma.data.synth.person import make_person
-    from gma.data.synth.presets import make_shots
+    from gma.synth.mesh_raster import MeshRasterizer
 
     cfg = config or SynthConfig()
     if cfg.width < 8 or cfg.height < 8:
         raise ValueError(f"image size {cfg.width}x{cfg.height} is too small (at least 8x8)")
     if ctx is None:
-        from gma.gpu import get_context
-
         ctx = get_context()
     body = body or load_body("anny")
     person = make_person(cfg.seed, cfg.texture_size, body)

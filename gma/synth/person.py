@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from gma.data.synth.garments import Garments, dress
-from gma.data.synth.mesh_raster import TexturedMesh, vertex_normals
-from gma.data.synth.texture import Look, bake_texture
+from gma.body import linear_blend_skinning, load_body
+from gma.synth.garments import Garments, dress
+from gma.synth.mesh_raster import TexturedMesh, vertex_normals
+from gma.synth.texture import Look, bake_texture
 
 __all__ = ["SynthPerson", "make_person"]
 
@@ -50,8 +51,6 @@ class SynthPerson:
     def posed_vertices(self, pose: np.ndarray, facial_actions: np.ndarray | None = None) -> np.ndarray:
         """Clothed vertices [T, V, 3] for Anny ``local-ref`` poses [T, 104, 4, 4] and optional facial
         actions [T, 52] (garment offsets ride on the expression-dependent rest shape)."""
-        from gma.body import linear_blend_skinning
-
         body = self.body
         shape = torch.as_tensor(self.phenotype, dtype=torch.float32)
         pose_t = torch.as_tensor(np.asarray(pose, np.float32))
@@ -77,8 +76,6 @@ def _rest_joints(body, phenotype: np.ndarray) -> dict[str, np.ndarray]:
 
 def make_person(seed: int, texture_size: int = 2048, body=None) -> SynthPerson:
     """The person for ``seed``: phenotype, clothes and texture all follow from it deterministically."""
-    from gma.body import load_body
-
     body = body or load_body("anny")
     rng = np.random.default_rng([seed, 1])  # a stream of its own, independent of motion/camera choices
     # gender, age, muscle, weight, height, proportions: adults of ordinary build.

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
-from gma.data.synth.garments import COLLAR, HAIR, HOOD, SHIRT, SHOES, SKIN, TROUSERS, Garments
-from gma.data.synth.uv_bake import dilate, rasterize_uv
+from gma.synth.garments import COLLAR, HAIR, HOOD, SHIRT, SHOES, SKIN, TROUSERS, Garments
+from gma.synth.uv_bake import dilate, rasterize_uv
 
 __all__ = ["Look", "bake_texture"]
 

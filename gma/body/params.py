@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.data.atomic import atomic_write_npz
+from gma.core.atomic import atomic_write_npz
 
 __all__ = [
     "ANNY_BONES",
@@ -252,7 +252,7 @@ def require_body_model(body: SequenceBody, source: str, model_dir: str | os.Path
         raise FileNotFoundError(f"{source}: {exc}") from exc
 
 
-class _RestrictedUnpickler(pickle.Unpickler):
+class RestrictedUnpickler(pickle.Unpickler):
     """Unpickler for files the user downloaded from the SMPL website / datasets: only numpy arrays,
     scipy sparse matrices and plain builtins may be built, so a hostile file cannot run code."""
 
@@ -293,7 +293,7 @@ def restricted_pickle_load(path: str | os.PathLike):
     Never used for GMA's own files, which are npz / json / safetensors."""
     with open(path, "rb") as f:
         try:
-            return _RestrictedUnpickler(f, encoding="latin1").load()
+            return RestrictedUnpickler(f, encoding="latin1").load()
         except (pickle.UnpicklingError, EOFError, AttributeError, ImportError) as exc:
             raise ValueError(f"{path}: cannot be read safely as a pickle ({exc})") from exc
 
