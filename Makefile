@@ -17,6 +17,8 @@ test: install
 
 lint:
 	$(PYTHON) -m ruff check gma viewer tests benchmarks
+	lint-imports
+	$(PYTHON) -m deptry .
 
 bench: install
 	$(PYTHON) benchmarks/render.py

@@ -8,7 +8,17 @@ import tempfile
 import pytest
 
 os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
-# Anny builds a ~1 GB cache on first model creation; keep it in one stable place across runs.
+
+# Fixtures that hand out a GPU context: a test that takes one is a `gpu` test whether or not it says so.
+GPU_FIXTURES = {"gpu", "gpu_no_float_atomics", "small_body_source"}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if GPU_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.gpu)
+        if "xvfb_display" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.window)
 
 
 @pytest.fixture(scope="session")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 import numpy as np
 import pytest
 
@@ -124,5 +126,5 @@ def test_cli_size_parser():
     from gma.core.args import parse_image_size as _size
 
     assert _size("512") == (512, 512) and _size("640x480") == (640, 480)
-    with pytest.raises(Exception, match="N or WxH"):
+    with pytest.raises(argparse.ArgumentTypeError, match="N or WxH"):
         _size("big")

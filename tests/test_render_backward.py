@@ -60,7 +60,8 @@ def assert_grads_close(got, want):
         assert err.max() <= HARD_REL_TOL, f"{name}: worst error {err.max():.3g} x max|grad|"
 
 
-@pytest.mark.parametrize("n,size", [(1, (21, 17)), (255, (64, 64)), (2000, (100, 75))])
+@pytest.mark.parametrize("n,size", [(1, (21, 17)), (255, (64, 64)),
+                                    pytest.param(2000, (100, 75), marks=pytest.mark.slow)])
 def test_gradients_match_reference(gpu, n, size):
     scene = torch_scene(n, seed=n + 1)
     cam = default_camera(*size)
@@ -88,6 +89,7 @@ def test_context_without_float_atomics(gpu_no_float_atomics):
     assert_grads_close(gpu_grads(ctx, scene, cam, up), reference_grads(scene, cam, up))
 
 
+@pytest.mark.slow
 def test_edge_cases_and_heavy_overlap(gpu):
     """Behind-camera, near-plane, edge-on, huge, zero-scale and invisible surfels, plus a dense stack."""
     scene = special_surfels()

@@ -16,6 +16,7 @@ def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
     return float(-10 * torch.log10(((a - b) ** 2).mean()))
 
 
+@pytest.mark.slow
 def test_adam_recovers_perturbed_scene(gpu):
     cam = default_camera(64, 64)
     view, K = torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K)

@@ -13,6 +13,9 @@ from gma.avatar import Avatar
 from gma.train.config import preset
 from gma.train.trainer import Trainer, work_dir
 
+# Each test fits a tiny avatar for a few steps: 1-2 s apiece on a 2-core CPU.
+pytestmark = pytest.mark.slow
+
 TINY = dict(resolution=48, checkpoint_every=1, log_every=1, preview_every=0, stage1_steps=2, stage2_steps=2,
             avatar={"feature_dim": 8, "fine_per_face": 1})
 
@@ -46,7 +49,7 @@ def _state(avatar: Avatar) -> dict:
     return {k: v.clone() for k, v in avatar.model.state_dict().items()}
 
 
-def test_two_stages_freeze(seq, anny_body, gpu, tmp_path):
+def test_two_stages_freeze(seq, anny_body, gpu, tmp_path, monkeypatch):
     cfg = preset("quick", **TINY)
     tr = Trainer(cfg, seq, tmp_path / "a.gma", body=anny_body, ctx=gpu, progress=False)
     init = _state(tr.avatar)
@@ -58,7 +61,7 @@ def test_two_stages_freeze(seq, anny_body, gpu, tmp_path):
         seen[stage.name] = {id(p) for g in opt.param_groups for p in g["params"]}
         return opt
 
-    tr._optimizer = spy
+    monkeypatch.setattr(tr, "_optimizer", spy)
     orig_save = tr.avatar.save
     snaps = {}
     from gma.train import trainer as trainer_mod
@@ -69,11 +72,8 @@ def test_two_stages_freeze(seq, anny_body, gpu, tmp_path):
         snaps[meta["step"]] = {k: v.clone() for k, v in model.state_dict().items()}
         real_ckpt(path, model, opt, meta)
 
-    trainer_mod.save_checkpoint = ckpt
-    try:
-        tr.run()
-    finally:
-        trainer_mod.save_checkpoint = real_ckpt
+    monkeypatch.setattr(trainer_mod, "save_checkpoint", ckpt)
+    tr.run()
     del orig_save
     m = tr.model
     # Stage 1 learns geometry (f_geo, F_coarse) and texture, never F_fine (the fine layer is not shown).
@@ -94,7 +94,7 @@ def test_two_stages_freeze(seq, anny_body, gpu, tmp_path):
     assert list((d / "previews").glob("*.png"))
 
 
-def test_resume_matches_uninterrupted(seq, anny_body, gpu, tmp_path):
+def test_resume_matches_uninterrupted(seq, anny_body, gpu, tmp_path, monkeypatch):
     full = _fit(seq, tmp_path / "full.gma", anny_body, gpu)
     calls = {"n": 0}
     orig = Trainer._loss
@@ -105,12 +105,10 @@ def test_resume_matches_uninterrupted(seq, anny_body, gpu, tmp_path):
             raise KeyboardInterrupt
         return orig(self, *a, **k)
 
-    Trainer._loss = dying
-    try:
+    with monkeypatch.context() as patch:
+        patch.setattr(Trainer, "_loss", dying)
         with pytest.raises(KeyboardInterrupt):
             _fit(seq, tmp_path / "cut.gma", anny_body, gpu)
-    finally:
-        Trainer._loss = orig
     assert not (tmp_path / "cut.gma").exists()
     resumed = _fit(seq, tmp_path / "cut.gma", anny_body, gpu, resume=True)
     a, b = _state(full), _state(resumed)

@@ -112,6 +112,7 @@ def test_swaps_resolved_on_a_turn():
 
 
 # -- body fit against exact landmarks ---------------------------------------------------------------
+@pytest.mark.slow
 def test_fit_recovers_gt_landmarks(synth_clip, rig):
     from gma.video.fit import FitConfig, fit_body
     from gma.video.targets import build_targets

@@ -13,7 +13,7 @@ from gma.view.selection import faces_in_box
 small_body_source = viewer_helpers.small_body_source  # fixtures
 xvfb_display = viewer_helpers.xvfb_display
 
-pytestmark = [pytest.mark.gpu, pytest.mark.display]
+pytestmark = [pytest.mark.gpu, pytest.mark.window]
 
 W, H = 160, 120
 # The window shows the same bytes as the offscreen texture (same passes, non-sRGB targets); allow a

@@ -29,18 +29,14 @@ def xvfb_display():
             break
     else:
         pytest.skip("could not start Xvfb on any display :151-:199")
-    old = os.environ.get("DISPLAY")
-    os.environ["DISPLAY"] = f":{num}"
-    yield f":{num}"
-    import glfw
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("DISPLAY", f":{num}")
+        yield f":{num}"
+        import glfw
 
-    glfw.terminate()
-    proc.terminate()
-    proc.wait(timeout=10)
-    if old is None:
-        os.environ.pop("DISPLAY", None)
-    else:
-        os.environ["DISPLAY"] = old
+        glfw.terminate()
+        proc.terminate()
+        proc.wait(timeout=10)
 
 
 @pytest.fixture(scope="session")

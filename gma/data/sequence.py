@@ -1,4 +1,4 @@
-"""The sequence format of DESIGN.md — reading with validation, and writing atomically.
+"""The sequence format of docs/design.md — reading with validation, and writing atomically.
 
 ::
 

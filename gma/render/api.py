@@ -81,7 +81,7 @@ class _RasterizeFunction(torch.autograd.Function):
 
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int,
               background=None, ctx: GpuContext | None = None) -> RenderOutput:
-    """Render 2D Gaussian surfels (DESIGN.md "Renderer contract") with the WGSL renderer; differentiable.
+    """Render 2D Gaussian surfels (docs/design.md "Renderer contract") with the WGSL renderer; differentiable.
 
     Args:
         means: [N, 3] world positions. quats: [N, 4] rotations (w, x, y, z), normalised internally.

@@ -1,4 +1,4 @@
-"""Pure-torch reference of the renderer contract (DESIGN.md, "Renderer contract"): per pixel, every
+"""Pure-torch reference of the renderer contract (docs/design.md, "Renderer contract"): per pixel, every
 surfel, no tiles and no screen-bound culling. Slow and memory-hungry by design; it is the oracle the
 WGSL passes are tested against, and it is differentiable (float64 works for gradcheck)."""
 

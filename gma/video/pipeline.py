@@ -1,4 +1,4 @@
-"""``gma import video clip.mp4 OUT``: from a raw video to a sequence (DESIGN.md "Sequence format") for
+"""``gma import video clip.mp4 OUT``: from a raw video to a sequence (docs/design.md "Sequence") for
 the default Anny body — masks and landmarks (MediaPipe), a static pinhole camera, a body fit, and a
 report with a contact sheet.
 

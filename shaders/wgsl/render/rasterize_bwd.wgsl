@@ -25,7 +25,7 @@ struct SurfelGrad {
     v_nd: vec4<f32>,     // normal (xyz), depth (w)
 }
 
-// d alpha / d(T, mu2d, opacity) scaled by v_alpha, for the alpha of DESIGN.md steps 2-3.
+// d alpha / d(T, mu2d, opacity) scaled by v_alpha, for the alpha of docs/design.md, renderer contract steps 2-3.
 fn alpha_backward(s: ProjectedSurfel, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
     let h_u = px.x * s.t2.xyz - s.t0.xyz;
     let h_v = px.y * s.t2.xyz - s.t1.xyz;

@@ -31,7 +31,7 @@ struct PixelResult {
     last: u32,                     // one past the last contributing intersection index (0: none)
 }
 
-// Alpha of surfel s at pixel centre px (the DESIGN.md contract, steps 2-3).
+// Alpha of surfel s at pixel centre px (docs/design.md renderer contract, steps 2-3).
 fn surfel_alpha(s: ProjectedSurfel, px: vec2<f32>) -> f32 {
     let h_u = px.x * s.t2.xyz - s.t0.xyz;
     let h_v = px.y * s.t2.xyz - s.t1.xyz;
