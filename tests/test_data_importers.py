@@ -16,7 +16,7 @@ from gma.data.importers import import_peoplesnapshot, import_video, import_xhuma
 from gma.data.importers._common import load_npy_safely
 from gma.data.importers.zjumocap import _rotvec_to_matrix
 
-W, H = 20, 16
+W, H = 40, 32
 
 
 def fake_smpl(root, kind="smpl", genders=("neutral", "male", "female"), v=30, j=24):

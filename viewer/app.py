@@ -6,7 +6,8 @@ import argparse
 import os
 import sys
 
-from gma.core.args import parse_image_size
+from gma.core.args import non_negative_int, parse_image_size, positive_int
+from gma.core.outputs import prepare_output_file
 from gma.core.report import run_reporting_errors
 
 __all__ = ["add_arguments", "main", "run"]
@@ -15,13 +16,15 @@ __all__ = ["add_arguments", "main", "run"]
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", nargs="?", default="body:anny",
                    help="a fitted avatar .gma, a splat .ply, or body:anny / body:smplx (placeholder surfels)")
-    p.add_argument("--surfels", type=int, default=50_000, help="placeholder surfels for body:* sources")
+    p.add_argument("--surfels", type=positive_int, default=50_000, help="placeholder surfels for body:* sources")
     p.add_argument("--size", type=parse_image_size, default=(800, 600), help="window size, N or WxH")
     p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
     p.add_argument("--sequence", default=None, help="sequence folder: its cameras become presets, its poses a motion")
     p.add_argument("--no-panels", action="store_true", help="no Dear ImGui panels (mouse and keys only)")
-    p.add_argument("--frames", type=int, default=0, help="draw this many frames and exit (0: until closed)")
+    p.add_argument("--frames", type=non_negative_int, default=0,
+                   help="draw this many frames and exit (0: until closed)")
     p.add_argument("--screenshot", default=None, help="with --frames: save the last frame as PNG")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --screenshot file")
 
 
 
@@ -35,6 +38,9 @@ def run(args: argparse.Namespace) -> int:
 
     width, height = args.size
     ctx = get_context()
+    ctx.check_image_size(width, height, "--size")  # before loading anything
+    if args.screenshot:
+        prepare_output_file(args.screenshot, args.force, "screenshot")
     source = load_source(ctx, args.source, args.surfels)
     presets = sequence_cameras(args.sequence) if args.sequence else []
     state = ViewerState(ctx, source, presets)

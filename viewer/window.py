@@ -15,7 +15,7 @@ import numpy as np
 import wgpu
 from wgpu.utils.glfw_present_info import get_glfw_present_info
 
-from gma.core.errors import GmaError
+from gma.core.errors import DeviceError, GmaError
 from gma.view.renderer import read_texture
 from gma.view.timing import FrameStats
 from viewer.state import ViewerState
@@ -29,13 +29,15 @@ class ViewerWindow:
     def __init__(self, state: ViewerState, width: int = 800, height: int = 600, title: str = "GMA viewer",
                  panels: bool = True, vsync: bool = False, visible: bool = True):
         self.state, self.ctx = state, state.ctx
+        self.ctx.check_image_size(int(width), int(height), "window")  # before glfw/wgpu, which abort on it
         if not glfw.init():
-            raise RuntimeError("glfw could not initialise (no display? set DISPLAY or run under Xvfb)")
+            raise DeviceError("cannot open a window: no display (set DISPLAY, or run under xvfb-run); "
+                              "`gma render` makes videos without one")
         glfw.window_hint(glfw.CLIENT_API, glfw.NO_API)
         glfw.window_hint(glfw.VISIBLE, visible)
         self.window = glfw.create_window(int(width), int(height), title, None, None)
         if not self.window:
-            raise RuntimeError("glfw could not create a window")
+            raise DeviceError(f"glfw could not create a {width}x{height} window on this display")
         self.context = wgpu.gpu.get_canvas_context(get_glfw_present_info(self.window, vsync=vsync))
         caps = [str(f) for f in self.context._get_capabilities(self.ctx.adapter)["formats"]]
         # A non-sRGB target keeps the surfel image's bytes as they are (the offscreen render is rgba8unorm).

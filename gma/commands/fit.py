@@ -1,7 +1,8 @@
 """``gma fit SEQ -o avatar.gma``: fit a Gaussian Morphing Avatar to a sequence (two stages: geometry
 through coarse surfels and the mesh layer, then fine surfels). Options override the chosen preset;
-the resolved config, checkpoint, metrics and previews go to ``<output>.fit/``. ``--resume`` continues
-an interrupted fit from its last checkpoint.
+the resolved config, checkpoint, metrics and previews go to ``<stem>.fit/`` beside the output (``me.fit/``
+for ``-o me.gma``). ``--resume`` continues an interrupted fit from its last checkpoint; an existing avatar
+is replaced only with ``--force``.
 
 With several sequences (``gma fit SEQ1 SEQ2 ... -o DIR``) the decoders are shared, as in the paper: each
 sequence gets its own avatar (``DIR/<sequence>.gma``, its own features and body identity) and the
@@ -11,6 +12,8 @@ features against them: ``gma fit NEW -o new.gma --decoders DIR/decoders.gma``.""
 from __future__ import annotations
 
 import argparse
+
+from gma.core.errors import InputError
 
 
 def register(subparsers) -> None:
@@ -23,7 +26,9 @@ def register(subparsers) -> None:
                                                 "decoders")
     p.add_argument("-o", "--output", required=True, help="avatar file to write (.gma); a folder for several "
                                                          "sequences")
-    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in <output>.fit/")
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint in <stem>.fit/")
+    p.add_argument("--force", action="store_true", help="overwrite an existing avatar; start over from an "
+                                                        "interrupted fit's checkpoint")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_dataclass_options(p, FitConfig)
     p.set_defaults(func=run)
@@ -33,10 +38,14 @@ def run(args: argparse.Namespace) -> int:
     from gma.commands._options import collect_overrides
     from gma.data import read_sequence
     from gma.train.config import preset
+    from gma.train.outputs import prepare_fit_outputs
     from gma.train.trainer import Trainer, work_dir
 
+    if args.resume and args.force:
+        raise InputError("--resume and --force contradict each other: continue the fit, or start it over")
     overrides = collect_overrides(args)
     cfg = preset(overrides.pop("preset", "quick"), **overrides)
+    prepare_fit_outputs(args.output, args.sequence, args.resume, args.force)  # before reading any image
     seqs = [read_sequence(s) for s in args.sequence]
     trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet)
     avatar = trainer.run(resume=args.resume)

@@ -3,30 +3,33 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from gma.core.args import non_negative_int, positive_float, positive_int
+from gma.core.errors import MissingFileError
 
 
 def _common(p: argparse.ArgumentParser, src_help: str) -> None:
     p.add_argument("src", help=src_help)
     p.add_argument("out", help="output sequence directory (written atomically)")
-    p.add_argument("--downscale", type=int, default=1, help="shrink images by this integer factor")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--downscale", type=positive_int, default=1, help="shrink images by this integer factor")
+    p.add_argument("--force", action="store_true", help="replace OUT if it is a sequence (never another folder)")
 
 
 def _range(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--start", type=int, default=0, help="first source frame")
-    p.add_argument("--end", type=int, default=None, help="stop before this source frame")
-    p.add_argument("--skip", type=int, default=1, help="keep every N-th frame")
+    p.add_argument("--start", type=non_negative_int, default=0, help="first source frame")
+    p.add_argument("--end", type=positive_int, default=None, help="stop before this source frame")
+    p.add_argument("--skip", type=positive_int, default=1, help="keep every N-th frame")
 
 
 def _run(args: argparse.Namespace) -> int:
-    try:
-        return _import(args)
-    except FileExistsError as exc:  # the CLI reports ValueError / FileNotFoundError as one clean line
-        raise ValueError(str(exc)) from exc
-
-
-def _import(args: argparse.Namespace) -> int:
     from gma.data import importers
+    from gma.data.sequence import prepare_sequence_output
+
+    source = Path(args.src)
+    if not source.exists():
+        raise MissingFileError(f"{source}: not found")
+    prepare_sequence_output(args.out, args.force)  # before reading or detecting anything
 
     kw = {"downscale": args.downscale, "overwrite": args.force}
     if args.format == "peoplesnapshot":
@@ -87,7 +90,7 @@ def _import(args: argparse.Namespace) -> int:
 
 def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     """No --body/--camera: masks, camera and body from the video itself (gma.video, needs gma[video])."""
-    from gma.video import FitConfig, MissingExtraError, VideoImportConfig, estimate_sequence
+    from gma.video import FitConfig, VideoImportConfig, estimate_sequence
 
     if args.alpha or args.mask_video is not None:
         raise ValueError("--alpha/--mask-video need --body and --camera; without them give --mask-dir or no "
@@ -96,11 +99,7 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
         raise ValueError("--camera needs --body; without --body give --focal instead (the camera is static)")
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
     cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
-    try:
-        seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body,
-                                        **kw)
-    except MissingExtraError as exc:  # the CLI prints ValueErrors as one line, without a traceback
-        raise ValueError(str(exc)) from exc
+    seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body, **kw)
     err = report.get("reprojection_error_px_mean")
     print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
           f"{report['frames_detected']}/{report['frames_used']} frames ({report['frames_interpolated']} "
@@ -132,7 +131,7 @@ def register(subparsers) -> None:
 
     xh = fmt.add_parser("xhumans", help="X-Humans take or subject folder (SMPL-X)")
     _common(xh, "a take folder (render/, SMPLX/) or a subject folder (train/Take*, test/Take*)")
-    xh.add_argument("--skip", type=int, default=1, help="keep every N-th frame")
+    xh.add_argument("--skip", type=positive_int, default=1, help="keep every N-th frame")
     xh.add_argument("--gender", choices=("neutral", "male", "female"), default=None)
     xh.add_argument(
         "--smplx-dir", default=None, help="folder with the SMPL-X model files (or $GMA_SMPLX_DIR)"
@@ -161,9 +160,9 @@ def register(subparsers) -> None:
                     "default: fitted to the video")
     vd.add_argument("--camera", default=None, help="cameras.json in the sequence format (with --body); "
                     "default: a static camera")
-    vd.add_argument("--focal", type=float, default=None, help="focal length in pixels when estimating "
+    vd.add_argument("--focal", type=positive_float, default=None, help="focal length in pixels when estimating "
                     "(default: the longer image side)")
-    vd.add_argument("--fit-iters", type=int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
+    vd.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
                     help="body fit steps per stage (root only; all bones; bones + phenotype + silhouette)")
     masks = vd.add_mutually_exclusive_group(required=False)
     masks.add_argument("--alpha", action="store_true", help="masks from the video's alpha channel")

@@ -11,7 +11,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from gma.core.args import parse_image_size
+from gma.core.args import non_negative_float, parse_image_size, positive_float, positive_int
+from gma.core.errors import InputError
+
+# A render longer than this is a typo (--seconds 1e6), not a request: an hour at 30 fps.
+MAX_FRAMES = 108_000
 
 
 def register(subparsers) -> None:
@@ -22,10 +26,11 @@ def register(subparsers) -> None:
     p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
     p.add_argument("--orbit", type=float, default=1.0, help="turns of the camera around the subject")
     p.add_argument("--elevation", type=float, default=10.0, help="camera elevation in degrees")
-    p.add_argument("--seconds", type=float, default=4.0, help="duration (0: one frame)")
-    p.add_argument("--fps", type=float, default=30.0, help="frames per second")
-    p.add_argument("--surfels", type=int, default=50_000, help="placeholder surfels for body:* sources")
+    p.add_argument("--seconds", type=non_negative_float, default=4.0, help="duration (0: one frame)")
+    p.add_argument("--fps", type=positive_float, default=30.0, help="frames per second")
+    p.add_argument("--surfels", type=positive_int, default=50_000, help="placeholder surfels for body:* sources")
     p.add_argument("--background", default="1,1,1", help="background colour r,g,b in [0, 1]")
+    p.add_argument("--force", action="store_true", help="overwrite OUT (a folder only if it holds recorded frames)")
     p.set_defaults(func=run)
 
 
@@ -33,24 +38,24 @@ def run(args: argparse.Namespace) -> int:
     from gma.gpu import get_context
     from gma.view import CameraPath, OrbitCamera, Scene
     from gma.view.controls import BodyControls, load_motion
-    from gma.view.record import Recorder, output_kind
+    from gma.view.record import Recorder, prepare_recording
     from gma.view.renderer import FrameRenderer
     from gma.view.source import load_source
 
     width, height = args.size
-    output_kind(args.out)  # fail on a bad suffix before loading anything
-    try:
-        background = tuple(float(v) for v in args.background.split(","))
-        assert len(background) == 3
-    except (ValueError, AssertionError):
-        raise ValueError(f"--background must be r,g,b, got {args.background!r}") from None
+    frames = max(1, round(args.seconds * args.fps))
+    if frames > MAX_FRAMES:
+        raise InputError(f"--seconds {args.seconds:g} at --fps {args.fps:g} is {frames:,} frames; at most "
+                         f"{MAX_FRAMES:,} (an hour at 30 fps) per render")
+    background = parse_background(args.background)
+    prepare_recording(args.out, args.force)  # bad suffix, existing output: before loading anything
     ctx = get_context()
+    ctx.check_image_size(width, height, "--size")
     source = load_source(ctx, args.source, args.surfels)
     scene = Scene(source)
     scene.options.background = background
     start = OrbitCamera.framing(*source.bounds(), up_axis=source.up_axis)
     start.elevation = args.elevation
-    frames = max(1, round(args.seconds * args.fps))
     path = CameraPath.turntable(start, max(args.seconds, 1e-6), args.orbit)
     pose_at = None
     if args.motion:
@@ -70,3 +75,14 @@ def run(args: argparse.Namespace) -> int:
         raise
     print(f"\nwrote {out} ({frames} frames, {recorder.width}x{recorder.height})", file=sys.stderr)
     return 0
+
+
+def parse_background(text: str) -> tuple[float, float, float]:
+    """``r,g,b`` with each value in [0, 1]."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(0.0 <= v <= 1.0 for v in values):
+        raise InputError(f"--background must be r,g,b with values in [0, 1], got {text!r}")
+    return values

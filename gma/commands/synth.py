@@ -5,13 +5,16 @@ from __future__ import annotations
 
 import argparse
 
-from gma.core.args import parse_image_size
+from gma.core.args import non_negative_int, parse_image_size, positive_int
 
 
 def _run(args: argparse.Namespace) -> int:
     import time
 
+    from gma.data.sequence import prepare_sequence_output
     from gma.synth.generate import SynthConfig, synthesize
+
+    prepare_sequence_output(args.out, args.force)  # in a second, before the body model loads
 
     w, h = args.size
     cfg = SynthConfig(
@@ -26,10 +29,7 @@ def _run(args: argparse.Namespace) -> int:
         texture_size=args.texture_size,
     )
     t0 = time.perf_counter()
-    try:
-        seq = synthesize(args.out, cfg, overwrite=args.force)
-    except FileExistsError as exc:
-        raise ValueError(str(exc)) from exc
+    seq = synthesize(args.out, cfg, overwrite=args.force)
     dt = time.perf_counter() - t0
     counts = ", ".join(f"{k} {len(v)}" for k, v in seq.splits.items())
     print(f"wrote {seq.root}: {len(seq)} frames at {w}x{h} ({counts}) in {dt:.1f} s")
@@ -50,10 +50,10 @@ def register(subparsers) -> None:
         "motion: varied motion (X-Humans-like)",
     )
     p.add_argument("--size", type=parse_image_size, default=(512, 512), help="image size, N or WxH (default 512)")
-    p.add_argument("--frames", type=int, default=60, help="training frames")
-    p.add_argument("--test-pose-frames", type=int, default=10, help="held-out novel-pose frames")
-    p.add_argument("--test-view-frames", type=int, default=10, help="held-out novel-view frames")
-    p.add_argument("--supersample", type=int, default=3, help="anti-aliasing factor per axis")
-    p.add_argument("--texture-size", type=int, default=2048, help="ground-truth texture resolution")
-    p.add_argument("--force", action="store_true", help="replace OUT if it exists")
+    p.add_argument("--frames", type=positive_int, default=60, help="training frames")
+    p.add_argument("--test-pose-frames", type=non_negative_int, default=10, help="held-out novel-pose frames")
+    p.add_argument("--test-view-frames", type=non_negative_int, default=10, help="held-out novel-view frames")
+    p.add_argument("--supersample", type=positive_int, default=3, help="anti-aliasing factor per axis")
+    p.add_argument("--texture-size", type=positive_int, default=2048, help="ground-truth texture resolution")
+    p.add_argument("--force", action="store_true", help="replace OUT if it is a sequence (never another folder)")
     p.set_defaults(func=_run)

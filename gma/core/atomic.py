@@ -19,7 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.errors import OutputExistsError
+
 __all__ = ["atomic_dir", "atomic_write_bytes", "atomic_write_json", "atomic_write_npz"]
+
+
+def _umask() -> int:
+    # The process umask can only be read by setting it; set it straight back.
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _fsync_dir(path: Path) -> None:
@@ -39,6 +48,7 @@ def _atomic_file(path: Path) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private (0600); outputs get normal permissions
     try:
         yield tmp_path
         with open(tmp_path, "rb+") as f:
@@ -90,10 +100,10 @@ def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pat
     """
     path = Path(path)
     if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} already exists (pass overwrite=True / --force to replace it)")
+        raise OutputExistsError(f"{path}: already exists; pass --force to replace it")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
-    os.chmod(tmp, 0o755)  # mkdtemp makes it private (0700); a dataset directory is normally shared
+    os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it private (0700); a dataset directory is normally shared
     try:
         yield tmp
     except BaseException:

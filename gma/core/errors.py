@@ -11,7 +11,7 @@ so that library callers that catch those keep working.
 
 from __future__ import annotations
 
-__all__ = ["DeviceError", "GmaError", "InputError", "MissingFileError", "OutputError"]
+__all__ = ["DeviceError", "GmaError", "InputError", "MissingFileError", "OutputError", "OutputExistsError"]
 
 
 class GmaError(Exception):
@@ -28,6 +28,10 @@ class MissingFileError(GmaError, FileNotFoundError):
 
 class OutputError(GmaError, OSError):
     """An output that cannot or may not be written (exists without --force, not writable, a folder)."""
+
+
+class OutputExistsError(OutputError, FileExistsError):
+    """An output that exists, where replacing it was not asked for."""
 
 
 class DeviceError(GmaError, RuntimeError):

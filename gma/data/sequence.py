@@ -30,13 +30,19 @@ from PIL import Image
 
 from gma.body.params import SequenceBody, load_body, require_body_model, save_body
 from gma.core.atomic import atomic_dir, atomic_write_json
+from gma.core.errors import InputError
+from gma.core.outputs import prepare_output_dir
 from gma.data.cameras import Cameras, load_cameras, save_cameras, validate_cameras
 
-__all__ = ["SPLIT_KEYS", "Sequence", "SequenceWriter", "read_sequence"]
+__all__ = ["SEQUENCE_ENTRIES", "SPLIT_KEYS", "Sequence", "SequenceWriter", "not_a_sequence", "prepare_sequence_output",
+           "read_sequence"]
 
 SPLIT_KEYS = ("train", "test", "test_pose", "test_view")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
+
+# Smaller frames cannot hold a person (and come from typos such as --downscale 1000).
+MIN_IMAGE_SIDE = 16
 
 def _list_images(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir()
@@ -74,27 +80,45 @@ class Sequence:
         return list(self.splits.get(name, []))
 
     def _read(self, path: Path) -> np.ndarray:
-        img = iio.imread(path)
+        """The image at ``path`` as float32 [H, W] or [H, W, C] in [0, 1], whatever its bit depth."""
+        try:
+            img = iio.imread(path)
+        except (OSError, ValueError, SyntaxError) as exc:  # truncated or corrupt files
+            raise InputError(f"{path}: cannot be read as an image (truncated or damaged? {exc})") from None
         if img.shape[:2] != (self.height, self.width):
-            raise ValueError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, cameras.json says "
+            raise InputError(f"{path}: image is {img.shape[1]}x{img.shape[0]}, cameras.json says "
                              f"{self.width}x{self.height}")
-        return img
+        return to_unit_range(img, path)
 
     def image(self, i: int) -> np.ndarray:
-        """Frame ``i`` as uint8 [H, W, 3] (alpha dropped)."""
+        """Frame ``i`` as uint8 [H, W, 3] (alpha dropped; 16-bit files are rounded to 8 bits)."""
         img = self._read(self.image_paths[i])
         if img.ndim == 2:
             img = np.repeat(img[..., None], 3, axis=2)
-        return np.ascontiguousarray(img[..., :3])
+        return np.ascontiguousarray(np.round(img[..., :3] * 255.0).astype(np.uint8))
 
     def mask(self, i: int) -> np.ndarray:
         """Person coverage of frame ``i``, float32 [H, W] in [0, 1]."""
         if self.mask_paths is None:
-            return self._read(self.image_paths[i])[..., 3].astype(np.float32) / 255.0
+            img = self._read(self.image_paths[i])
+            if img.ndim != 3 or img.shape[2] != 4:
+                raise InputError(f"{self.image_paths[i]}: has no alpha channel and the sequence has no masks folder")
+            return np.ascontiguousarray(img[..., 3])
         m = self._read(self.mask_paths[i])
         if m.ndim == 3:
             m = m[..., 0]
-        return m.astype(np.float32) / (255.0 if m.dtype == np.uint8 else 65535.0)
+        return np.ascontiguousarray(m)
+
+
+def to_unit_range(img: np.ndarray, path) -> np.ndarray:
+    """Integer pixels of any bit depth (8-bit, 16-bit PNG) or booleans to float32 in [0, 1]."""
+    if img.dtype == np.bool_:
+        return img.astype(np.float32)
+    if img.dtype == np.uint8:
+        return img.astype(np.float32) / 255.0
+    if img.dtype == np.uint16:
+        return img.astype(np.float32) / 65535.0
+    raise InputError(f"{path}: pixels of type {img.dtype} are not supported; save it as an 8- or 16-bit PNG or JPEG")
 
 
 def _check_frames(root: Path) -> tuple[list[Path], list[Path] | None, tuple[int, int]]:
@@ -110,10 +134,13 @@ def _check_frames(root: Path) -> tuple[list[Path], list[Path] | None, tuple[int,
         try:
             with Image.open(p) as im:  # reads the header only
                 s, mode = im.size, im.mode
-        except Exception as exc:
-            raise ValueError(f"{p}: not a readable image ({exc})") from exc
+        except Exception as exc:  # PIL raises many kinds for a broken header
+            raise InputError(f"{p}: not a readable image ({exc})") from None
         if size is None:
             size = s
+            if min(s) < MIN_IMAGE_SIDE:
+                raise InputError(f"{p}: image is {s[0]}x{s[1]}, too small to fit an avatar to (at least "
+                                 f"{MIN_IMAGE_SIDE} pixels per side)")
         elif s != size:
             raise ValueError(f"{p}: image is {s[0]}x{s[1]} but {images[0].name} is {size[0]}x{size[1]}; "
                              "all frames must have the same size")
@@ -197,6 +224,31 @@ def _to_uint8(a: np.ndarray, name: str) -> np.ndarray:
     raise ValueError(f"{name} has dtype {a.dtype}; expected uint8 or float in [0, 1]")
 
 
+# What a sequence folder written by GMA holds (the format's files and what synth / the video import add).
+SEQUENCE_ENTRIES = {"images", "masks", "cameras.json", "body.npz", "splits.json", "gt_mesh.npz", "gt_texture.png",
+                    "synth.json", "video_report.json", "video_contact_sheet.png"}
+
+
+def not_a_sequence(path: Path) -> str | None:
+    """None when the folder ``path`` is a sequence as GMA writes them (so ``--force`` may replace it);
+    otherwise why it is not (missing format files, or other files that replacing it would delete)."""
+    entries = {e.name for e in Path(path).iterdir()}
+    missing = [n for n in ("cameras.json", "body.npz", "images") if n not in entries]
+    if missing:
+        return f"no {', '.join(missing)}"
+    foreign = sorted(entries - SEQUENCE_ENTRIES)
+    if foreign:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        return f"it also holds {shown}"
+    return None
+
+
+def prepare_sequence_output(out: str | os.PathLike, force: bool = False) -> Path:
+    """Check before any work that ``out`` may receive a sequence: a new folder, or with ``force`` an
+    existing sequence (never another folder). Raises :class:`gma.core.errors.OutputError`."""
+    return prepare_output_dir(out, force, "sequence", not_a_sequence)
+
+
 class SequenceWriter:
     """Writes a sequence into a hidden temporary directory and moves it into place on :meth:`close`
     (or the end of a ``with`` block) after validating it; on an error nothing appears at ``out``.
@@ -216,7 +268,11 @@ class SequenceWriter:
                  check_body_model: bool = False):
         self.out = Path(out)
         self.width, self.height = int(width), int(height)
+        if min(self.width, self.height) < MIN_IMAGE_SIDE:
+            raise InputError(f"{self.out}: frames of {self.width}x{self.height} are too small to fit an avatar to "
+                             f"(at least {MIN_IMAGE_SIDE} pixels per side; is --downscale too large?)")
         self.check_body_model = check_body_model
+        prepare_sequence_output(self.out, overwrite)
         self._ctx = atomic_dir(self.out, overwrite=overwrite)
         self._tmp = self._ctx.__enter__()
         (self._tmp / "images").mkdir()

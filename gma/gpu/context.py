@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import wgpu
 
+from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
@@ -20,7 +21,12 @@ __all__ = ["GpuContext", "NoAdapterError", "get_context"]
 OPTIONAL_FEATURES = ("shader-float32-atomic", "subgroup", "timestamp-query")
 
 # Limits we raise to what the adapter offers (WebGPU defaults are far lower than real hardware).
+class GpuMemoryError(DeviceError, MemoryError):
+    """A buffer larger than the adapter allows (the message says which and what to reduce)."""
+
+
 RAISED_LIMITS = (
+    "max-texture-dimension-2d",
     "max-storage-buffer-binding-size",
     "max-buffer-size",
     "max-storage-buffers-per-shader-stage",
@@ -142,14 +148,23 @@ class GpuContext:
                 entries.append({"binding": i, "resource": b})
         return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
 
+    def check_image_size(self, width: int, height: int, what: str = "image") -> None:
+        """Refuse, before any texture is made, an image the adapter cannot hold (wgpu would abort the
+        process instead of raising)."""
+        limit = int(self.device.limits["max-texture-dimension-2d"])
+        if not (1 <= width <= limit and 1 <= height <= limit):
+            raise DeviceError(f"{what} of {width}x{height} pixels: this adapter ({self.name}) allows 1 to {limit} "
+                              "pixels per side")
+
     # -- buffers ------------------------------------------------------------------------------------
     def buffer(self, nbytes: int, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:
         """An uninitialised (zeroed by wgpu) buffer of at least 4 bytes; sizes round up to 4."""
         size = max(4, (int(nbytes) + 3) // 4 * 4)
         if size > int(self.device.limits["max-buffer-size"]):
-            raise MemoryError(f"buffer {label!r} needs {size} bytes, over the device's max-buffer-size")
+            raise GpuMemoryError(f"buffer {label!r} needs {size} bytes, over the device's max-buffer-size; "
+                                 "render fewer surfels or a smaller image")
         if usage & wgpu.BufferUsage.STORAGE and size > self.max_binding_bytes:
-            raise MemoryError(f"buffer {label!r} needs {size} bytes, over the adapter's storage binding limit of "
+            raise GpuMemoryError(f"buffer {label!r} needs {size} bytes, over the adapter's storage binding limit of "
                               f"{self.max_binding_bytes} bytes; render fewer surfels or a smaller image")
         self.allocated_bytes += size
         return self.device.create_buffer(label=label, size=size, usage=usage)

@@ -29,7 +29,7 @@ from gma.body import load_body
 from gma.body.params import SequenceBody
 from gma.core.atomic import atomic_write_json
 from gma.data.cameras import Cameras
-from gma.data.sequence import Sequence, SequenceWriter
+from gma.data.sequence import Sequence, SequenceWriter, prepare_sequence_output
 from gma.gpu import get_context
 from gma.synth.garments import GARMENTS
 from gma.synth.person import make_person
@@ -70,6 +70,7 @@ def synthesize(
     from gma.synth.mesh_raster import MeshRasterizer
 
     cfg = config or SynthConfig()
+    prepare_sequence_output(out, overwrite)  # before the person and the renderer: fail fast
     if cfg.width < 8 or cfg.height < 8:
         raise ValueError(f"image size {cfg.width}x{cfg.height} is too small (at least 8x8)")
     if ctx is None:

@@ -10,6 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from gma.avatar.posing import frame_params
+from gma.train.validate import check_frames
 
 __all__ = ["FrameSet", "load_frames"]
 
@@ -70,5 +71,7 @@ def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0) -> 
             params = body.check_params(frame_params(seq.body.model, seq.body.frame(i)))
             rests.append(body.rest_vertices(params).float())
             bones.append(body.bone_transforms(params).float())
-    return FrameSet(torch.stack(images), torch.stack(masks), torch.stack(Ks), torch.stack(w2cs),
-                    torch.stack(rests), torch.stack(bones), list(idx), params["shape"].clone())
+    frames = FrameSet(torch.stack(images), torch.stack(masks), torch.stack(Ks), torch.stack(w2cs),
+                      torch.stack(rests), torch.stack(bones), list(idx), params["shape"].clone())
+    check_frames(seq, frames, body)
+    return frames

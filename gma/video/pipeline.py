@@ -26,7 +26,7 @@ from gma.body.params import load_body as load_body_params
 from gma.core.atomic import atomic_write_json, atomic_write_npz
 from gma.data.importers._common import mask_from_array, write_imported
 from gma.data.importers.video import count_frames
-from gma.data.sequence import IMAGE_SUFFIXES, Sequence
+from gma.data.sequence import IMAGE_SUFFIXES, Sequence, prepare_sequence_output
 from gma.video.camera import intrinsics, static_camera
 from gma.video.detect import detect_frames
 from gma.video.fit import FitConfig, fit_body
@@ -97,8 +97,7 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
 
     cfg = config or VideoImportConfig()
     src, out = Path(src), Path(out)
-    if out.exists() and not overwrite:
-        raise FileExistsError(f"{out}: already exists (use --force to replace it)")
+    prepare_sequence_output(out, overwrite)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)

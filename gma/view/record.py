@@ -9,6 +9,7 @@ written under a temporary name that is renamed into place by :meth:`Recorder.clo
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -16,10 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.errors import OutputError
+from gma.core.outputs import prepare_output_dir, prepare_output_file
 from gma.view.orbit import CameraPath
 from gma.view.renderer import FrameRenderer, Scene
 
-__all__ = ["Recorder", "output_kind"]
+__all__ = ["Recorder", "not_a_frames_dir", "output_kind", "prepare_recording"]
+
+
+FRAME_NAME = re.compile(r"\d{6}\.png")
 
 
 def output_kind(path: str | Path) -> str:
@@ -30,6 +36,20 @@ def output_kind(path: str | Path) -> str:
     if suffix == "":
         return "frames"
     raise ValueError(f"{path}: unsupported output; use .mp4, .gif or a directory name for PNG frames")
+
+
+def not_a_frames_dir(path: Path) -> str | None:
+    """None when ``path`` holds only numbered PNG frames as the recorder writes them (so it may be replaced),
+    else why not."""
+    foreign = sorted(e.name for e in Path(path).iterdir() if not FRAME_NAME.fullmatch(e.name))
+    return None if not foreign else f"it holds {', '.join(foreign[:3])}" + (" ..." if len(foreign) > 3 else "")
+
+
+def prepare_recording(out: str | Path, force: bool = False) -> Path:
+    """Check before rendering that ``out`` (a .mp4/.gif file or a folder of PNG frames) may be written."""
+    if output_kind(out) == "frames":
+        return prepare_output_dir(out, force, "folder of frames", not_a_frames_dir)
+    return prepare_output_file(out, force, "video")
 
 
 class Recorder:
@@ -57,7 +77,8 @@ class Recorder:
         if self.kind == "frames":
             self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".partial", dir=self.out.parent))
         else:
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.out.stem}.", suffix=self.out.suffix, dir=self.out.parent)
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.out.name}.", suffix=".tmp" + self.out.suffix,
+                                       dir=self.out.parent)
             os.close(fd)
             self._tmp = Path(tmp)
         self._writer = None
@@ -112,9 +133,15 @@ class Recorder:
 
             iio.imwrite(self._tmp, np.stack(self._gif_frames), extension=".gif", duration=1000.0 / self.fps, loop=0)
         # mkstemp/mkdtemp make private files; a rendered video is an ordinary user file.
-        os.chmod(self._tmp, 0o755 if self.kind == "frames" else 0o644)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(self._tmp, (0o777 if self.kind == "frames" else 0o666) & ~umask)
         if self.kind == "frames":
             if self.out.exists():
+                why = not_a_frames_dir(self.out)
+                if why is not None:  # never delete a folder that is not an earlier recording
+                    self.abort()
+                    raise OutputError(f"{self.out}: not replaced, it is not a folder of recorded frames ({why})")
                 shutil.rmtree(self.out)
             os.replace(self._tmp, self.out)
         else:

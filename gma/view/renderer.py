@@ -95,6 +95,7 @@ class FrameRenderer:
     # -- resources ------------------------------------------------------------------------------------
     def _ensure_image(self, w: int, h: int) -> None:
         if self._image_size != (w, h):
+            self.ctx.check_image_size(w, h, "the frame")
             self._image = self.ctx.device.create_texture(
                 size=(w, h, 1), format=wgpu.TextureFormat.rgba8unorm,
                 usage=wgpu.TextureUsage.STORAGE_BINDING | wgpu.TextureUsage.TEXTURE_BINDING, label="viewer.image")
@@ -238,6 +239,7 @@ class FrameRenderer:
         redrawn once if the intersection capacity had to grow (so no surfel is dropped)."""
         w, h = camera.width, camera.height
         if self._offscreen is None or self._offscreen.size[:2] != (w, h):
+            self.ctx.check_image_size(w, h, "the image")
             self._offscreen = self.ctx.device.create_texture(
                 size=(w, h, 1), format=OFFSCREEN_FORMAT,
                 usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC, label="viewer.offscreen")
