@@ -124,7 +124,7 @@ def test_redecode_only_touched_faces(anny_body):
 
 
 def test_view_adapter(anny_body, gpu, tmp_path):
-    """``gma view avatar.gma`` opens through gma.view.load_source -> gma.avatar.open_view_source."""
+    """``gma view avatar.gma`` opens through gma.view.load_source -> gma.view.source.avatar_source."""
     from gma.view.source import load_source
 
     av = Avatar.create(AvatarConfig(**SMALL), anny_body)

@@ -184,7 +184,7 @@ BAD = {
     "pickled body": (
         lambda s: np.savez(s / "body.npz", model="anny", pose=np.array([{}], dtype=object)),
         "body.npz",
-        "without pickle",
+        "pickled Python objects",
     ),
     "truncated body": (
         lambda s: (s / "body.npz").write_bytes(b"PK\x03\x04garbage"),

@@ -27,6 +27,7 @@ from safetensors.torch import load, save
 from gma.avatar.config import AvatarConfig
 from gma.avatar.model import AvatarModel, DecodedAvatar
 from gma.body import load_body
+from gma.body.registry import BODY_MODELS
 from gma.core.atomic import atomic_write_bytes
 from gma.core.errors import InputError
 
@@ -99,11 +100,20 @@ class Avatar:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: avatar file not found")
         tensors, meta = read_gma(path)
+        for key in ("config", "body"):
+            if key not in meta:
+                raise AvatarFileError(f"{path}: the avatar metadata has no {key!r} entry (damaged or not written "
+                                      "by GMA)")
         try:
             config = AvatarConfig.from_dict(json.loads(meta["config"]))
             history, info = json.loads(meta.get("history", "[]")), json.loads(meta.get("info", "{}"))
         except (ValueError, TypeError, KeyError) as exc:
-            raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from exc
+            raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from None
+        if not isinstance(history, list) or not isinstance(info, dict):
+            raise AvatarFileError(f"{path}: bad avatar metadata (history must be a list, info an object)")
+        if meta["body"] not in BODY_MODELS:
+            raise AvatarFileError(f"{path}: bound to body model {meta['body']!r}, which GMA does not know "
+                                  f"({', '.join(BODY_MODELS)})")
         if body is None:
             body = load_body(meta["body"])
         if body.name != meta["body"]:

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from gma.core.atomic import atomic_write_npz
+from gma.core.errors import InputError
 
 __all__ = [
     "ANNY_BONES",
@@ -164,13 +165,18 @@ def load_body(path: str | os.PathLike, num_frames: int | None = None) -> Sequenc
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: body parameter file not found")
+    with path.open("rb") as fh:
+        magic = fh.read(4)
+    if magic != b"PK\x03\x04":  # np.load would try to unpickle anything that is not a zip or .npy
+        raise InputError(f"{path}: not an .npz file (an .npz is a zip archive of numpy arrays)")
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except ValueError as exc:
-        raise ValueError(f"{path}: cannot read without pickle ({exc}); store plain numeric arrays") from exc
+    except ValueError:  # an array stored as pickled Python objects
+        raise InputError(f"{path}: holds pickled Python objects, which GMA never loads (a file from a stranger "
+                         "could run code); store plain numeric arrays and a string 'model'") from None
     except Exception as exc:  # zipfile.BadZipFile, OSError, EOFError ... from a truncated file
-        raise ValueError(f"{path}: not a readable .npz file ({exc})") from exc
+        raise InputError(f"{path}: not a readable .npz file ({exc})") from None
     if "model" not in arrays:
         raise ValueError(f"{path}: no 'model' entry (expected one of {BODY_MODELS})")
     model = str(arrays.pop("model"))

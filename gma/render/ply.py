@@ -11,9 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.errors import InputError
 from gma.render.scenes import quat_multiply
 
 SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic constant
+# Far above any real scene (the largest public captures have ~10^7), far below what would exhaust memory.
+MAX_SPLATS = 100_000_000
 REQUIRED = ("x", "y", "z", "rot_0", "rot_1", "rot_2", "rot_3", "opacity", "scale_0", "scale_1")
 
 _PLY_TYPES = {"float": "f4", "float32": "f4", "double": "f8", "float64": "f8", "uchar": "u1", "uint8": "u1",
@@ -21,37 +24,59 @@ _PLY_TYPES = {"float": "f4", "float32": "f4", "double": "f8", "float64": "f8", "
               "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4"}
 
 
+def _vertex_count(word: str, path: Path) -> int:
+    """The vertex count of the header, checked against what a file can hold before anything is allocated."""
+    try:
+        count = int(word)
+    except ValueError:
+        raise InputError(f"{path}: vertex count {word!r} is not a number") from None
+    if count < 1:
+        raise InputError(f"{path}: the PLY holds {count} vertices; a splat file needs at least one")
+    if count > MAX_SPLATS:
+        raise InputError(f"{path}: {count:,} vertices is more than this reader takes ({MAX_SPLATS:,})")
+    return count
+
+
 def _read_header(fh, path: Path) -> tuple[str, int, list[tuple[str, str]]]:
     if fh.readline().strip() != b"ply":
-        raise ValueError(f"{path}: not a PLY file (missing 'ply' magic)")
+        raise InputError(f"{path}: not a PLY file (missing 'ply' magic)")
     fmt, count, props, in_vertex = None, None, [], False
     while True:
         line = fh.readline()
         if not line:
-            raise ValueError(f"{path}: PLY header ends without 'end_header'")
+            raise InputError(f"{path}: PLY header ends without 'end_header'")
         words = line.decode("ascii", "replace").split()
         if not words or words[0] in ("comment", "obj_info"):
             continue
+        text = " ".join(words)
         if words[0] == "format":
+            if len(words) < 2:
+                raise InputError(f"{path}: PLY header line {text!r} names no format")
             fmt = words[1]
         elif words[0] == "element":
+            if len(words) < 3:
+                raise InputError(f"{path}: PLY header line {text!r} needs a name and a count")
             in_vertex = words[1] == "vertex"
             if in_vertex:
-                count = int(words[2])
+                count = _vertex_count(words[2], path)
             elif count is None:
-                raise ValueError(f"{path}: element '{words[1]}' precedes 'vertex'; not a splat PLY")
+                raise InputError(f"{path}: element '{words[1]}' precedes 'vertex'; not a splat PLY")
         elif words[0] == "property" and in_vertex:
+            if len(words) < 3:
+                raise InputError(f"{path}: PLY header line {text!r} needs a type and a name")
             if words[1] == "list":
-                raise ValueError(f"{path}: list properties in the vertex element are not supported")
+                raise InputError(f"{path}: list properties in the vertex element are not supported")
             if words[1] not in _PLY_TYPES:
-                raise ValueError(f"{path}: unknown PLY property type {words[1]!r}")
+                raise InputError(f"{path}: unknown PLY property type {words[1]!r}")
+            if any(name == words[2] for name, _ in props):
+                raise InputError(f"{path}: vertex property {words[2]!r} is declared twice")
             props.append((words[2], _PLY_TYPES[words[1]]))
         elif words[0] == "end_header":
             break
     if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
-        raise ValueError(f"{path}: unsupported PLY format {fmt!r}")
+        raise InputError(f"{path}: unsupported PLY format {fmt!r}")
     if count is None:
-        raise ValueError(f"{path}: no vertex element")
+        raise InputError(f"{path}: no vertex element")
     return fmt, count, props
 
 
@@ -79,18 +104,25 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
         names = [p[0] for p in props]
         missing = [r for r in REQUIRED if r not in names]
         if missing:
-            raise ValueError(f"{path}: missing splat properties {missing}; expected the INRIA Gaussian layout")
+            raise InputError(f"{path}: missing splat properties {missing}; expected the INRIA Gaussian layout")
         if fmt == "ascii":
-            data = np.loadtxt(fh, dtype=np.float64, max_rows=count, ndmin=2)
+            try:
+                data = np.loadtxt(fh, dtype=np.float64, max_rows=count, ndmin=2)
+            except ValueError as exc:  # numpy's message names neither the file nor the format
+                raise InputError(f"{path}: ASCII vertex data is not {len(props)} numbers per line "
+                                 f"({_first_line(exc)})") from None
             if data.shape != (count, len(props)):
-                raise ValueError(f"{path}: expected {count} vertices of {len(props)} values, got {data.shape}")
+                raise InputError(f"{path}: expected {count} vertices of {len(props)} values, got {data.shape}")
             columns = {n: data[:, i] for i, n in enumerate(names)}
         else:
             order = "<" if fmt == "binary_little_endian" else ">"
             dtype = np.dtype([(n, order + t) for n, t in props])
+            if path.stat().st_size < dtype.itemsize * count:  # before reading gigabytes of a short file
+                raise InputError(f"{path}: file is truncated (the header promises {count:,} vertices of "
+                                 f"{dtype.itemsize} bytes, the file has {path.stat().st_size:,} bytes in all)")
             raw = fh.read(dtype.itemsize * count)
             if len(raw) < dtype.itemsize * count:
-                raise ValueError(f"{path}: file is truncated ({len(raw)} of {dtype.itemsize * count} vertex bytes)")
+                raise InputError(f"{path}: file is truncated ({len(raw)} of {dtype.itemsize * count} vertex bytes)")
             arr = np.frombuffer(raw, dtype=dtype, count=count)
             columns = {n: arr[n] for n in names}
 
@@ -118,7 +150,7 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
     out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
     bad = [k for k, v in out.items() if not np.isfinite(v).all()]
     if bad:
-        raise ValueError(f"{path}: non-finite values in {bad}")
+        raise InputError(f"{path}: non-finite values in {bad}")
     return out
 
 
@@ -150,3 +182,7 @@ def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors) ->
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -5,6 +5,7 @@ checkpoint of an interrupted fit: the first needs ``--force``, the second ``--re
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -38,6 +39,13 @@ def prepare_fit_outputs(out: str | Path, seqs: list, resume: bool = False, force
     if len(seqs) > 1:
         prepare_output_file(out / "decoders.gma", replace, "decoders file")
     prepare_output_file(checkpoint, True, "checkpoint")  # the work folder must be writable too
+    if interrupted and resume:
+        saved = work_dir(out) / "config.json"
+        try:
+            json.loads(saved.read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(f"{saved}: the interrupted fit's config cannot be read ({exc}); --force starts the "
+                             "fit over") from None
     if interrupted and force and not resume:
         checkpoint.unlink()
     return avatars

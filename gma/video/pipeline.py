@@ -14,6 +14,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +25,7 @@ from gma.body import load_body
 from gma.body.params import SequenceBody
 from gma.body.params import load_body as load_body_params
 from gma.core.atomic import atomic_write_json, atomic_write_npz
+from gma.core.errors import GmaError, InputError
 from gma.data.importers._common import mask_from_array, write_imported
 from gma.data.importers.video import count_frames
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence, prepare_sequence_output
@@ -103,14 +105,28 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
     n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
     timings["decode"] = time.perf_counter() - t0
-    T, H, W = frames.shape[:3]
     work = work_dir(out)
+    existed = work.exists()
+    try:
+        return _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress,
+                         anny, timings)
+    except (GmaError, ValueError) as exc:
+        # Keep OUT.work only when it holds work a next run reuses (detections, a body fit), and say so.
+        if not existed and (not any(work.rglob("*.npz")) or "no person detected" in str(exc)):
+            shutil.rmtree(work, ignore_errors=True)
+            raise
+        raise type(exc)(f"{exc} (the detections and fits done so far are kept in {work}; the next run reuses "
+                        "them, delete it to start over)") from None
 
+
+def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress, anny,
+              timings):
+    T, H, W = frames.shape[:3]
     t0 = time.perf_counter()
     det, reused = detect_frames(frames, work / "detect", progress=progress)
     timings["detect"] = time.perf_counter() - t0
     if not det.found.any():
-        raise ValueError(f"{src}: no person detected in any of the {T} frames")
+        raise InputError(f"{src}: no person detected in any of the {T} frames")
     if mask_dir is not None:
         total = n_src if n_src is not None else _count(src)
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))

@@ -1,0 +1,340 @@
+"""Careless and hostile input against every command: each case must end with exit code 2 and one line
+that names the culprit, must not touch what was already on disk, and must not leave litter. The table
+grows with every bug found (one row per case; the row says what it feeds and what the line must name).
+
+Argparse's own errors (a bad option value) print the usage before the error line: for those the last
+line is checked instead of the only line.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from gma.cli import main
+
+pytestmark = pytest.mark.gpu
+
+
+# -- what the cases run on ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def seq_dir(tmp_path_factory, gpu, anny_body) -> Path:
+    """A tiny valid sequence, copied by each case that damages it."""
+    from gma.synth.generate import SynthConfig, synthesize
+
+    cfg = SynthConfig(width=32, height=32, train_frames=2, test_pose_frames=1, test_view_frames=1,
+                      supersample=1, texture_size=128)
+    return synthesize(tmp_path_factory.mktemp("hostile") / "seq", cfg, ctx=gpu, body=anny_body,
+                      progress=False).root
+
+
+@pytest.fixture(scope="module")
+def avatar_file(tmp_path_factory, anny_body) -> Path:
+    from gma.avatar import Avatar, AvatarConfig
+
+    return Avatar.create(AvatarConfig(feature_dim=4, fine_per_face=1), anny_body).save(
+        tmp_path_factory.mktemp("hostile_avatar") / "a.gma")
+
+
+def _snapshot(root: Path) -> dict[str, str]:
+    """Every file under ``root`` with a hash of its bytes, and every folder."""
+    out = {}
+    for p in sorted(root.rglob("*")):
+        rel = str(p.relative_to(root))
+        out[rel] = hashlib.sha1(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+    return out
+
+
+def _user_folder(path: Path) -> Path:
+    path.mkdir(parents=True)
+    (path / "thesis.txt").write_text("years of work")
+    (path / "photos").mkdir()
+    (path / "photos" / "a.jpg").write_bytes(b"\xff\xd8 not really")
+    return path
+
+
+def _copy_seq(seq_dir: Path, to: Path) -> Path:
+    shutil.copytree(seq_dir, to)
+    return to
+
+
+def _ply(path: Path, header: str, body: bytes = b"") -> Path:
+    path.write_bytes(header.encode() + body)
+    return path
+
+
+PLY_PROPS = "".join(f"property float {n}\n" for n in ("x", "y", "z", "scale_0", "scale_1", "rot_0", "rot_1",
+                                                       "rot_2", "rot_3", "opacity"))
+
+
+@dataclass
+class Case:
+    name: str
+    make: object  # (tmp, seq_dir, avatar_file) -> argv list
+    names: str  # text the error line must contain (the culprit)
+    argparse: bool = False  # argparse's usage + error
+    env: dict = field(default_factory=dict)
+
+
+def _damaged_seq(fn):
+    """A case maker that copies the sequence, lets ``fn(seq)`` damage it, and fits it."""
+
+    def make(tmp, seq_dir, avatar):
+        seq = _copy_seq(seq_dir, tmp / "seq")
+        fn(seq)
+        return ["fit", str(seq), "-o", str(tmp / "out.gma"), "--quiet", "--stage1-steps", "1", "--stage2-steps", "1"]
+    return make
+
+
+def _truncate_png(seq):
+    p = sorted((seq / "images").iterdir())[0]
+    p.write_bytes(p.read_bytes()[:60])
+
+
+def _empty_masks(seq):
+    for p in (seq / "masks").iterdir():
+        iio.imwrite(p, np.zeros((32, 32), np.uint8))
+
+
+def _infinite_k(seq):
+    cams = json.loads((seq / "cameras.json").read_text())
+    cams["K"][0][0] = 1e999  # JSON turns it into Infinity
+    (seq / "cameras.json").write_text(json.dumps(cams))
+
+
+def _random_body(seq):
+    (seq / "body.npz").write_bytes(os.urandom(3000))
+
+
+def _body_behind_camera(seq):
+    cams = json.loads((seq / "cameras.json").read_text())
+    w2c = np.asarray(cams["w2c"], np.float64)
+    w2c[..., 2, 3] = -w2c[..., 2, 3] - 1.0  # the person now stands behind the camera
+    cams["w2c"] = w2c.tolist()
+    (seq / "cameras.json").write_text(json.dumps(cams))
+
+
+def _tiny_images(seq):
+    for folder in ("images", "masks"):
+        for p in (seq / folder).iterdir():
+            img = iio.imread(p)
+            iio.imwrite(p, img[:8, :8])
+    cams = json.loads((seq / "cameras.json").read_text())
+    cams["width"] = cams["height"] = 8
+    (seq / "cameras.json").write_text(json.dumps(cams))
+
+
+def _interrupted(tmp, seq_dir, avatar):
+    fit_dir = tmp / "out.fit"
+    fit_dir.mkdir()
+    (fit_dir / "checkpoint.safetensors").write_bytes(b"step 34")
+    (fit_dir / "config.json").write_text("{}")
+    return ["fit", str(seq_dir), "-o", str(tmp / "out.gma")]
+
+
+def _resume_bad_config(tmp, seq_dir, avatar):
+    fit_dir = tmp / "out.fit"
+    fit_dir.mkdir()
+    (fit_dir / "checkpoint.safetensors").write_bytes(b"step 34")
+    (fit_dir / "config.json").write_text("{ not json")
+    return ["fit", str(seq_dir), "-o", str(tmp / "out.gma"), "--resume"]
+
+
+def _avatar_without_body(tmp, seq_dir, avatar):
+    from safetensors import safe_open
+    from safetensors.torch import save
+
+    with safe_open(str(avatar), "pt") as f:
+        meta = dict(f.metadata())
+        tensors = {k: f.get_tensor(k) for k in f.keys()}
+    del meta["body"]
+    bad = tmp / "nobody.gma"
+    bad.write_bytes(save(tensors, metadata=meta))
+    return ["eval", str(bad), str(seq_dir)]
+
+
+CASES = [
+    # gma synth
+    Case("synth --force over a user's folder",
+         lambda t, s, a: ["synth", str(_user_folder(t / "mine")), "--force", "--size", "32"], "mine"),
+    Case("synth . --force", lambda t, s, a: ["synth", ".", "--force", "--size", "32"], "current folder"),
+    Case("synth over an existing sequence without --force",
+         lambda t, s, a: ["synth", str(_copy_seq(s, t / "seq")), "--size", "32"], "already exists"),
+    Case("synth under a file", lambda t, s, a: ["synth", str(_ply(t / "f", "x")) + "/seq"], "is a file"),
+    Case("synth --frames 0", lambda t, s, a: ["synth", str(t / "n"), "--frames", "0"], "--frames", argparse=True),
+    Case("synth --size 0", lambda t, s, a: ["synth", str(t / "n"), "--size", "0"], "--size", argparse=True),
+    # gma fit: outputs
+    Case("fit over an existing avatar", lambda t, s, a: ["fit", str(s), "-o", str(shutil.copy(a, t / "x.gma"))],
+         "already exists"),
+    Case("fit -o a folder", lambda t, s, a: ["fit", str(s), "-o", str(_user_folder(t / "dir.gma"))], "is a folder"),
+    Case("fit -o not .gma", lambda t, s, a: ["fit", str(s), "-o", str(t / "a.txt")], "must end in .gma"),
+    Case("fit again after an interrupted fit", _interrupted, "interrupted fit exists"),
+    Case("fit --resume with a corrupt config.json", _resume_bad_config, "config.json"),
+    Case("fit --resume --force", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--resume", "--force"],
+         "contradict"),
+    # gma fit: inputs
+    Case("fit a missing sequence", lambda t, s, a: ["fit", str(t / "nope"), "-o", str(t / "o.gma")], "nope"),
+    Case("fit a truncated PNG", _damaged_seq(_truncate_png), "000000.png"),
+    Case("fit all-empty masks", _damaged_seq(_empty_masks), "covers no pixel"),
+    Case("fit an infinite focal length", _damaged_seq(_infinite_k), "cameras.json"),
+    Case("fit a body.npz of random bytes", _damaged_seq(_random_body), "body.npz"),
+    Case("fit a body behind the camera", _damaged_seq(_body_behind_camera), "behind the camera"),
+    Case("fit 8x8 images", _damaged_seq(_tiny_images), "too small"),
+    # gma eval
+    Case("eval an avatar without body metadata", _avatar_without_body, "nobody.gma"),
+    Case("eval random bytes as an avatar",
+         lambda t, s, a: ["eval", str(_ply(t / "r.gma", "garbage")), str(s)], "r.gma"),
+    # gma render
+    Case("render --fps 0", lambda t, s, a: ["render", "body:anny", "-o", str(t / "o.mp4"), "--fps", "0"], "--fps",
+         argparse=True),
+    Case("render a billion frames", lambda t, s, a: ["render", "body:anny", "-o", str(t / "o.mp4"), "--seconds",
+                                                     "1e6", "--fps", "1000"], "--seconds"),
+    Case("render --size 100000", lambda t, s, a: ["render", str(a), "-o", str(t / "o.mp4"), "--size", "100000"],
+         "100000x100000"),
+    Case("render over an existing video",
+         lambda t, s, a: ["render", str(a), "-o", str(_ply(t / "o.mp4", "old video"))], "already exists"),
+    Case("render --force into a user's folder",
+         lambda t, s, a: ["render", str(a), "-o", str(_user_folder(t / "frames")), "--force"], "frames"),
+    Case("render to an unknown format", lambda t, s, a: ["render", str(a), "-o", str(t / "o.txt")], "o.txt"),
+    Case("render a bad background", lambda t, s, a: ["render", str(a), "-o", str(t / "o.mp4"), "--background",
+                                                     "2,0,0"], "--background"),
+    # gma render-ply: broken headers
+    Case("ply without a vertex count",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat binary_little_endian 1.0\nelement vertex\n"
+                                                 + PLY_PROPS + "end_header\n")), "-o", str(t / "o.png")], "a.ply"),
+    Case("ply without a format",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat\nelement vertex 1\n" + PLY_PROPS
+                                                 + "end_header\n")), "-o", str(t / "o.png")], "a.ply"),
+    Case("ply property without a name",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
+                                                 "property float\nend_header\n")), "-o", str(t / "o.png")], "a.ply"),
+    Case("ply with 0 vertices",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 0\n"
+                                                 + PLY_PROPS + "end_header\n")), "-o", str(t / "o.png")], "0 vertices"),
+    Case("ply with 10^11 vertices",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat binary_little_endian 1.0\nelement vertex "
+                                                 "100000000000\n" + PLY_PROPS + "end_header\n")), "-o",
+                          str(t / "o.png")], "a.ply"),
+    Case("ascii ply with words for numbers",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_PROPS
+                                                 + "end_header\n", b"a b c d e f g h i j\n")), "-o", str(t / "o.png")],
+         "a.ply"),
+    # gma view (no window is opened: every case fails before)
+    Case("view --size 100000", lambda t, s, a: ["view", str(a), "--size", "100000"], "100000x100000"),
+    Case("view without a display", lambda t, s, a: ["view", str(a), "--frames", "1"], "no display",
+         env={"DISPLAY": None, "WAYLAND_DISPLAY": None}),
+    # gma import
+    Case("import a missing video", lambda t, s, a: ["import", "video", str(t / "none.mp4"), str(t / "o")],
+         "none.mp4"),
+    Case("import --downscale 0", lambda t, s, a: ["import", "video", str(a), str(t / "o"), "--downscale", "0"],
+         "--downscale", argparse=True),
+    Case("import --focal -100", lambda t, s, a: ["import", "video", str(a), str(t / "o"), "--focal", "-100"],
+         "--focal", argparse=True),
+    Case("import --force over a user's folder",
+         lambda t, s, a: ["import", "video", str(a), str(_user_folder(t / "mine")), "--force"], "mine"),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_hostile_input(case, tmp_path, seq_dir, avatar_file, capsys, monkeypatch):
+    work = tmp_path / "w"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    for key, value in case.env.items():
+        if value is None:
+            monkeypatch.delenv(key, raising=False)
+        else:
+            monkeypatch.setenv(key, value)
+    argv = case.make(work, seq_dir, avatar_file)
+    before, seq_before = _snapshot(work), _snapshot(seq_dir)
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2, f"exit {code}: {err}"
+    assert err, "no message"
+    line = err[-1]
+    if not case.argparse:
+        assert len(err) == 1, f"more than one line: {err}"
+    assert "error:" in line and case.names in line, line
+    # Nothing that existed changed, and nothing new is left behind but what the case itself made.
+    after = _snapshot(work)
+    assert {k: v for k, v in after.items() if k in before} == before
+    litter = [k for k in after if k not in before and (k.startswith(".") or "/." in k or k.endswith(".work"))]
+    assert not litter, litter
+    assert _snapshot(seq_dir) == seq_before
+
+
+def test_debug_shows_the_traceback(tmp_path, capsys):
+    with pytest.raises(FileNotFoundError):
+        main(["--debug", "fit", str(tmp_path / "nope"), "-o", str(tmp_path / "o.gma")])
+
+
+def _write_png16(path: Path, arr: np.ndarray) -> None:
+    """A 16-bit grey or RGB PNG (Pillow cannot write 16-bit RGB)."""
+    import struct
+    import zlib
+
+    h, w = arr.shape[:2]
+    colour = 0 if arr.ndim == 2 else 2
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = arr.reshape(h, -1).astype(">u2")
+    raw = b"".join(b"\x00" + row.tobytes() for row in rows)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, colour, 0, 0, 0))
+                     + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def test_16_bit_images_read_on_the_8_bit_scale(seq_dir, tmp_path):
+    """A 16-bit PNG of the same picture reads as the 8-bit one (it used to come out on a 0..257 scale)."""
+    from gma.data import read_sequence
+
+    seq = _copy_seq(seq_dir, tmp_path / "seq")
+    first = sorted((seq / "images").iterdir())[0]
+    img8 = iio.imread(first)[..., :3]
+    _write_png16(first, img8.astype(np.uint16) * 257)
+    mask = sorted((seq / "masks").iterdir())[0]
+    m8 = iio.imread(mask)
+    _write_png16(mask, m8.astype(np.uint16) * 257)
+    s = read_sequence(seq)
+    np.testing.assert_array_equal(s.image(0), img8[..., :3])
+    np.testing.assert_allclose(s.mask(0), m8 / 255.0, atol=1e-6)
+
+
+def test_stale_litter_is_cleaned_and_an_old_copy_restored(tmp_path):
+    from gma.core.outputs import prepare_output_dir, prepare_output_file
+
+    out = tmp_path / "a.gma"
+    (tmp_path / ".a.gma.x1.tmp").write_bytes(b"half")
+    prepare_output_file(out)
+    assert not (tmp_path / ".a.gma.x1.tmp").exists()
+    # A replacement killed between its two renames: the old sequence sits in .seq.*.old/dir.
+    old = tmp_path / ".seq.k2.old" / "dir"
+    old.mkdir(parents=True)
+    (old / "cameras.json").write_text("{}")
+    (tmp_path / ".seq.k3.partial").mkdir()
+    prepare_output_dir(tmp_path / "seq", force=False)
+    assert (tmp_path / "seq" / "cameras.json").is_file()
+    assert not list(tmp_path.glob(".seq.*"))
+
+
+def test_outputs_respect_the_umask(tmp_path):
+    from gma.core.atomic import atomic_write_bytes
+
+    old = os.umask(0o022)
+    try:
+        atomic_write_bytes(tmp_path / "f.bin", b"x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o644
