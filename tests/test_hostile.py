@@ -227,6 +227,15 @@ CASES = [
          lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_PROPS
                                                  + "end_header\n", b"a b c d e f g h i j\n")), "-o", str(t / "o.png")],
          "a.ply"),
+    Case("render-ply over an existing image",
+         lambda t, s, a: ["render-ply", str(_ply(t / "a.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_PROPS
+                                                 + "end_header\n", b"0 0 0 0 0 1 0 0 0 0\n")), "-o",
+                          str(_ply(t / "keep.png", "old"))], "keep.png"),
+    # gma body
+    Case("body export-obj over an existing file",
+         lambda t, s, a: ["body", "export-obj", str(_ply(t / "b.obj", "mine"))], "already exists"),
+    Case("body export-obj past the motion's end",
+         lambda t, s, a: ["body", "export-obj", str(t / "b.obj"), "--motion", "walk", "--frame", "200"], "--frame"),
     # gma view (no window is opened: every case fails before)
     Case("view --size 100000", lambda t, s, a: ["view", str(a), "--size", "100000"], "100000x100000"),
     Case("view without a display", lambda t, s, a: ["view", str(a), "--frames", "1"], "no display",

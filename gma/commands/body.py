@@ -11,6 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.args import non_negative_int, positive_int
+from gma.core.atomic import atomic_write_bytes
+from gma.core.errors import InputError
+from gma.core.outputs import prepare_output_file
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("body", help="inspect the body model, export posed meshes")
@@ -29,8 +34,9 @@ def register(subparsers) -> None:
     common(exp)
     exp.add_argument("out", type=Path, help="output .obj path")
     exp.add_argument("--motion", default=None, help="built-in motion (Anny): turn, walk, wave, expressions")
-    exp.add_argument("--frame", type=int, default=0, help="frame of the motion")
-    exp.add_argument("--frames", type=int, default=120, help="length of the motion")
+    exp.add_argument("--frame", type=non_negative_int, default=0, help="frame of the motion")
+    exp.add_argument("--frames", type=positive_int, default=120, help="length of the motion")
+    exp.add_argument("--force", action="store_true", help="overwrite an existing OBJ")
     exp.set_defaults(func=run_export)
 
 
@@ -68,12 +74,15 @@ def write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray, face_uvs: np.
     else:
         lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text("\n".join(lines) + "\n")
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
 
 
 def run_export(args: argparse.Namespace) -> int:
     import torch
 
+    prepare_output_file(args.out, args.force, "OBJ file")
+    if args.frame >= args.frames:
+        raise InputError(f"--frame {args.frame} is past the motion's last frame ({args.frames - 1})")
     body = _body(args)
     if args.motion:
         from gma.body.motions import motion

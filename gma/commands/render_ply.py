@@ -7,6 +7,7 @@ import argparse
 import numpy as np
 
 from gma.core.args import parse_image_size
+from gma.core.outputs import prepare_output_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,6 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="image size for the automatic camera")
     p.add_argument("--background", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "G", "B"))
     p.add_argument("--depth", help="also write a normalised depth PNG here")
+    p.add_argument("--force", action="store_true", help="overwrite existing output files")
     p.set_defaults(func=run)
 
 
@@ -43,6 +45,9 @@ def run(args: argparse.Namespace) -> int:
     from gma.render.image_io import save_png
     from gma.render.ply import load_splat_ply
 
+    prepare_output_file(args.output, args.force, "image")
+    if args.depth:
+        prepare_output_file(args.depth, args.force, "depth image")
     splats = load_splat_ply(args.ply)
     cam = Camera.load(args.camera) if args.camera else framing_camera(splats["means"], *args.size)
     t = {k: torch.from_numpy(v) for k, v in splats.items()}

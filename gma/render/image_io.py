@@ -21,8 +21,11 @@ def save_png(path: str | Path, image: np.ndarray) -> Path:
     data = image if image.dtype == np.uint8 else to_uint8(image)
     if data.ndim == 3 and data.shape[2] == 1:
         data = data[..., 0]
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.png")
     os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp's files are private; an image is an ordinary user file
     try:
         iio.imwrite(tmp, data, extension=".png")
         os.replace(tmp, path)
