@@ -92,11 +92,11 @@ def main() -> None:
         from gma.gpu import get_context
         from gma.view import BodySource
         from gma.view.timing import FrameStats
-        from viewer.app import parse_size
+        from gma.core.args import parse_image_size
         from viewer.state import ViewerState
         from viewer.window import ViewerWindow
 
-        w, h = parse_size(args.size)
+        w, h = parse_image_size(args.size)
         ctx = get_context()
         from gma.body import load_body
 
