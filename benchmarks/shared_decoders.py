@@ -18,7 +18,7 @@ from pathlib import Path
 
 
 def main() -> int:
-    from fit_helpers import evaluate_row, fit_and_eval, sequence
+    from fit_helpers import evaluate_row, fit_and_eval, sequence, smoke_overrides
 
     from gma.avatar import Avatar
     from gma.body import load_body
@@ -41,10 +41,10 @@ def main() -> int:
     rows: dict[str, dict] = {}
 
     train_seqs = [sequence(str(out / f"seq{s}"), s) for s in args.train_seeds]
-    base = preset(args.preset)
+    base = preset(args.preset, **smoke_overrides())
     n = len(train_seqs)
-    cfg = preset(args.preset, stage1_steps=base.stage1_steps * n, stage2_steps=base.stage2_steps * n,
-                 training=args.training)
+    cfg = preset(args.preset, **smoke_overrides(stage1_steps=base.stage1_steps * n,
+                                                stage2_steps=base.stage2_steps * n, training=args.training))
     t0 = time.perf_counter()
     trainer = Trainer(cfg, train_seqs, out / "decoders", body=body, ctx=ctx)
     trainer.run(resume=True)

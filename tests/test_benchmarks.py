@@ -1,0 +1,49 @@
+"""Every benchmark script runs end to end in smoke mode (tiny sizes, a few steps), so none rots between
+the runs that produce the figures. Figures printed here mean nothing; the scripts' defaults give them.
+
+A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+BENCH = REPO / "benchmarks"
+HELPERS = {"common.py", "fit_helpers.py"}  # modules the scripts import, not scripts
+
+# script -> arguments that make it small; {tmp} is a fresh folder for its outputs. None: skip, with why.
+SMOKE: dict[str, list[str] | str] = {
+    "render.py": ["--repeats", "1", "--sizes", "64", "--counts", "500"],
+    "render_backward.py": ["--repeats", "1", "--counts", "500"],
+    "body_posing.py": ["--per-face", "1", "--frames", "2"],
+    "synth.py": ["--size", "48"],
+    "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--sample-every", "2"],
+    "avatar_decode.py": ["--size", "64"],
+    "fit_presets.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
+    "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
+    "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
+    "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",
+}
+
+
+def test_every_script_has_a_smoke_row():
+    scripts = {p.name for p in BENCH.glob("*.py")} - HELPERS
+    assert scripts == set(SMOKE), f"add rows for {sorted(scripts - set(SMOKE))}, drop {sorted(set(SMOKE) - scripts)}"
+
+
+@pytest.mark.slow
+@pytest.mark.gpu
+@pytest.mark.parametrize("script", sorted(SMOKE))
+def test_benchmark_runs(script, tmp_path):
+    args = SMOKE[script]
+    if isinstance(args, str):
+        pytest.skip(args)
+    env = dict(os.environ, GMA_BENCH_SMOKE="1", PYTHONPATH=str(REPO))
+    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=tmp_path) for a in args)]
+    out = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, f"{' '.join(cmd)}\n{out.stdout[-2000:]}\n{out.stderr[-3000:]}"
