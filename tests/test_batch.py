@@ -219,6 +219,7 @@ def test_a_task_killed_midway_resumes(people, ray_runtime, single, tmp_path):
 @pytest.mark.slow
 def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_path):
     from gma.batch.runner import run_batch
+    from gma.batch.task import phase1_config
     from gma.data import read_sequence
     from gma.train.trainer import Trainer
 
@@ -226,9 +227,9 @@ def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_
     trio = [people[n] for n in ("p1", "p2", "p3")]
     rows = run_batch(trio, tmp_path / "out", _batch(steps=("fit",), train_decoders=2), fit, progress=False)
     assert [r["status"] for r in rows] == ["done"] * 3
-    # The same as: gma fit p1 p2 -o ref; gma fit p3 -o p3.gma --decoders ref/decoders.gma
+    # The same as: gma fit p1 p2 -o ref (twice the steps); gma fit p3 -o p3.gma --decoders ref/decoders.gma
     seqs = [read_sequence(p.source) for p in trio]
-    Trainer(fit, seqs[:2], tmp_path / "ref", body=anny_body, ctx=gpu, progress=False).run()
+    Trainer(phase1_config(fit, 2), seqs[:2], tmp_path / "ref", body=anny_body, ctx=gpu, progress=False).run()
     own = dataclasses.replace(fit, decoders=str(tmp_path / "ref" / "decoders.gma"))
     p3 = Trainer(own, seqs[2], tmp_path / "p3.gma", body=anny_body, ctx=gpu, progress=False).run()
     from gma.avatar import Avatar

@@ -6,6 +6,7 @@ it, so that one bad video does not stop a batch of a thousand."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import traceback
 from pathlib import Path
@@ -15,7 +16,7 @@ from gma.batch.steps import OUTPUTS, STEPS, PersonJob, StepSkipped
 from gma.core.atomic import atomic_write_json
 from gma.train.config import FitConfig
 
-__all__ = ["SHARED_DIR", "is_finished", "run_person", "run_shared_decoders", "shared_paths"]
+__all__ = ["SHARED_DIR", "is_finished", "phase1_config", "run_person", "run_shared_decoders", "shared_paths"]
 
 SHARED_DIR = "_shared"  # OUT/_shared/: phase 1 of a shared-decoder batch ("_" is never a person's name)
 
@@ -72,9 +73,15 @@ def shared_paths(out: Path) -> tuple[Path, Path]:
     return folder, folder / "decoders.gma"
 
 
+def phase1_config(fit: FitConfig, people: int) -> FitConfig:
+    """The fit of phase 1: the steps of one fit per person of the subset, since the shared fit's steps take
+    the people in turn (so each sees as many steps as its own fit would give it)."""
+    return dataclasses.replace(fit, stage1_steps=fit.stage1_steps * people, stage2_steps=fit.stage2_steps * people)
+
+
 def run_shared_decoders(jobs: list[PersonJob]) -> dict:
     """Phase 1: ``gma fit SEQ1 ... SEQk -o OUT/_shared/fit`` over the people of ``jobs`` (their sequences
-    imported already), resumable like any fit. Returns the status of ``OUT/_shared`` with
+    imported already; :func:`phase1_config` steps), resumable like any fit. Returns the status of ``OUT/_shared`` with
     ``avatars``: {person name: avatar file} and ``decoders``: the decoders file (when done)."""
     from gma.batch.steps import _body, _ctx
     from gma.train.outputs import prepare_fit_outputs
@@ -89,7 +96,7 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
     t0 = time.perf_counter()
     try:
         seqs = [job.sequence() for job in jobs]
-        fit: FitConfig = jobs[0].fit
+        fit = phase1_config(jobs[0].fit, len(jobs))
         prepare_fit_outputs(folder, seqs, resume=True)
         trainer = Trainer(fit, seqs, folder, body=_body(fit.avatar.body), ctx=_ctx(), progress=False)
         trainer.run(resume=True)
