@@ -39,6 +39,8 @@ def register(subparsers) -> None:
     p.add_argument("--eval-resolution", type=positive_int, default=512, help="longest image side of the evaluation")
     p.add_argument("--video-size", type=positive_int, default=256, help="turntable video frame size")
     p.add_argument("--video-frames", type=positive_int, default=72, help="turntable video frames")
+    p.add_argument("--export-format", choices=("3dgs", "2dgs"), default="3dgs",
+                   help="export step: splat PLY layout of the canonical pose")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     add_dataclass_options(p, FitConfig)
     p.set_defaults(func=run)
@@ -55,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     batch = BatchConfig(steps=steps, train_decoders=args.train_decoders, address=args.address,
                         cpus_per_task=args.cpus_per_task, gpus_per_task=args.gpus_per_task,
                         eval_resolution=args.eval_resolution, video_size=args.video_size,
-                        video_frames=args.video_frames)
+                        video_frames=args.video_frames, export_format=args.export_format)
     overrides = collect_overrides(args)
     fit = preset(overrides.pop("preset", "quick"), **overrides)
     if fit.decoders:
