@@ -109,6 +109,20 @@ def test_export_is_skipped_when_absent(monkeypatch, tmp_path):
         export_step(job)
 
 
+def test_a_failing_step_is_recorded_not_raised(tmp_path):
+    """run_person without Ray: a video that is no video fails at import, with its error and traceback in the
+    status file, and the steps after it do not run."""
+    from gma.batch.task import run_person
+
+    (tmp_path / "clip.mp4").write_bytes(b"not a video")
+    job = PersonJob(find_people([str(tmp_path / "clip.mp4")])[0], tmp_path / "out", _batch(steps=("import", "fit")),
+                    preset("quick", **TINY))
+    status = run_person(job)
+    assert status["state"] == "failed" and status["error"].startswith("import: ")
+    assert "Traceback" in status["traceback"] and "fit" not in status["steps"]
+    assert json.loads((tmp_path / "out" / "clip" / "status.json").read_text())["state"] == "failed"
+
+
 def _fake_person(tmp_path):
     (tmp_path / "s").mkdir(exist_ok=True)
     (tmp_path / "s" / "cameras.json").write_text("{}")
@@ -158,17 +172,17 @@ def single(people, gpu, anny_body, tmp_path_factory):
     return out
 
 
-def _same_avatar(path, state):
+def _same_avatar(path, state, steps: int = 6):
     """As equal as two runs of ``gma fit`` itself: lavapipe's float atomics sum gradients in a varying
     order, and Adam (eps 1e-15) turns the sign of a near-zero gradient into a full step of the learning
-    rate, so a few feature entries in 10^5 differ by up to one step (0.05) between two identical runs;
-    everything else agrees to 1e-4."""
+    rate (0.05), so a few feature entries in 10^4 differ between two identical runs, by at most one step
+    per fit step; everything else agrees to 1e-4."""
     from gma.avatar import Avatar
 
     mine = Avatar.load(path).model.state_dict()
     for k, v in state.items():
         off = ~torch.isclose(mine[k], v, atol=1e-4, rtol=1e-3)
-        assert off.float().mean() < 1e-3 and (mine[k] - v).abs().max() <= 0.06, k
+        assert off.float().mean() < 1e-3 and (mine[k] - v).abs().max() <= 0.05 * steps, k
 
 
 @pytest.mark.slow
@@ -236,7 +250,21 @@ def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_
 
     for name in ("p1", "p2"):
         _same_avatar(tmp_path / "out" / name / "avatar.gma",
-                     Avatar.load(tmp_path / "ref" / f"{name}.gma").model.state_dict())
+                     Avatar.load(tmp_path / "ref" / f"{name}.gma").model.state_dict(), steps=12)
     _same_avatar(tmp_path / "out" / "p3" / "avatar.gma", p3.model.state_dict())
     status = json.loads((tmp_path / "out" / "p3" / "status.json").read_text())
     assert status["steps"]["fit"]["decoders"].endswith("decoders.gma")
+
+
+@pytest.mark.slow
+def test_decoders_from_one_person(people, ray_runtime, tmp_path):
+    """One person's own fit is the decoder set: phase 1 is an ordinary avatar, which --decoders takes."""
+    from gma.batch.runner import run_batch
+
+    out = tmp_path / "out"
+    rows = run_batch([people["p1"], people["p2"]], out, _batch(steps=("fit",), train_decoders=1),
+                     preset("quick", **TINY), progress=False)
+    assert [r["status"] for r in rows] == ["done", "done"]
+    assert (out / "_shared" / "p1.gma").is_file()
+    fit = json.loads((out / "p2" / "status.json").read_text())["steps"]["fit"]
+    assert fit["decoders"] == str(out / "_shared" / "p1.gma")

@@ -124,17 +124,17 @@ def run_batch(inputs: list[Person], out: str | Path, batch: BatchConfig, fit: Fi
     ``ray_init`` adds keyword arguments to ``ray.init`` (tests pass ``num_cpus``)."""
     ray = import_ray()
     out = Path(out).resolve()
-    check_batch_folder(out, batch, fit, inputs)
-    out.mkdir(parents=True, exist_ok=True)
-    _record(out, batch, fit, inputs)
-    report = (lambda line: tqdm.write(line, file=sys.stderr)) if progress else (lambda line: None)
-
-    subset = inputs[:batch.train_decoders] if fit.decoders == "" else []
     if batch.train_decoders and fit.decoders:
         raise InputError("--train-decoders and --decoders contradict each other: train shared decoders here, or "
                          "use given ones")
     if batch.train_decoders > len(inputs):
         raise InputError(f"--train-decoders {batch.train_decoders}: only {len(inputs)} people given")
+    check_batch_folder(out, batch, fit, inputs)
+    out.mkdir(parents=True, exist_ok=True)
+    _record(out, batch, fit, inputs)
+    report = (lambda line: tqdm.write(line, file=sys.stderr)) if progress else (lambda line: None)
+
+    subset = inputs[:batch.train_decoders]
     jobs = {p.name: PersonJob(p, out, batch, fit) for p in inputs}
     finished = {name for name, job in jobs.items() if is_finished(job)}
     if len(finished) == len(jobs):  # nothing to do: no runtime to start

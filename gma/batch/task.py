@@ -13,7 +13,6 @@ from pathlib import Path
 
 from gma.batch.status import TaskStatus
 from gma.batch.steps import OUTPUTS, STEPS, PersonJob, StepSkipped
-from gma.core.atomic import atomic_write_json
 from gma.train.config import FitConfig
 
 __all__ = ["SHARED_DIR", "is_finished", "phase1_config", "run_person", "run_shared_decoders", "shared_paths"]
@@ -67,10 +66,13 @@ def run_person(job: PersonJob) -> dict:
     return status.data
 
 
-def shared_paths(out: Path) -> tuple[Path, Path]:
-    """(the folder phase 1 fits into, its decoders file)."""
-    folder = Path(out) / SHARED_DIR / "fit"
-    return folder, folder / "decoders.gma"
+def shared_paths(out: Path, people: list[str]) -> tuple[Path, Path]:
+    """(what phase 1 fits into: ``-o`` of its ``gma fit``, its decoders file). With one person that is
+    an ordinary avatar, whose decoders ``--decoders`` takes as well."""
+    root = Path(out) / SHARED_DIR
+    if len(people) == 1:
+        return root / f"{people[0]}.gma", root / f"{people[0]}.gma"
+    return root / "fit", root / "fit" / "decoders.gma"
 
 
 def phase1_config(fit: FitConfig, people: int) -> FitConfig:
@@ -81,15 +83,15 @@ def phase1_config(fit: FitConfig, people: int) -> FitConfig:
 
 def run_shared_decoders(jobs: list[PersonJob]) -> dict:
     """Phase 1: ``gma fit SEQ1 ... SEQk -o OUT/_shared/fit`` over the people of ``jobs`` (their sequences
-    imported already; :func:`phase1_config` steps), resumable like any fit. Returns the status of ``OUT/_shared`` with
-    ``avatars``: {person name: avatar file} and ``decoders``: the decoders file (when done)."""
+    imported already; :func:`phase1_config` steps), resumable like any fit. Returns the status of
+    ``OUT/_shared`` with ``avatars``: {person name: avatar file} and ``decoders``: the decoders file."""
     from gma.batch.steps import _body, _ctx
     from gma.train.outputs import prepare_fit_outputs
     from gma.train.trainer import Trainer, subject_outputs
 
-    out = jobs[0].out
-    folder, decoders = shared_paths(out)
-    status = TaskStatus(folder.parent, SHARED_DIR, ",".join(j.person.name for j in jobs))
+    names = [j.person.name for j in jobs]
+    target, decoders = shared_paths(jobs[0].out, names)
+    status = TaskStatus(jobs[0].out / SHARED_DIR, SHARED_DIR, ",".join(names))
     if status.data["state"] == "done" and decoders.is_file():
         return status.data
     status.start()
@@ -97,11 +99,11 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
     try:
         seqs = [job.sequence() for job in jobs]
         fit = phase1_config(jobs[0].fit, len(jobs))
-        prepare_fit_outputs(folder, seqs, resume=True)
-        trainer = Trainer(fit, seqs, folder, body=_body(fit.avatar.body), ctx=_ctx(), progress=False)
+        prepare_fit_outputs(target, seqs, resume=True)
+        trainer = Trainer(fit, seqs if len(seqs) > 1 else seqs[0], target, body=_body(fit.avatar.body), ctx=_ctx(),
+                          progress=False)
         trainer.run(resume=True)
-        avatars = {job.person.name: str(p) for job, p in zip(jobs, subject_outputs(folder, seqs), strict=True)}
-        atomic_write_json(folder.parent / "people.json", avatars)
+        avatars = {name: str(p) for name, p in zip(names, subject_outputs(target, seqs), strict=True)}
         status.data.update(avatars=avatars, decoders=str(decoders))
         status.set_step("fit", "done", time.perf_counter() - t0, people=len(jobs))
     except Exception as exc:
