@@ -99,11 +99,25 @@ def _crashed(job: PersonJob, exc: BaseException) -> dict:
     return status.data
 
 
+def _running(pending: dict) -> str:
+    """"name:step" of the people still running, from their status files (a cheap read every few seconds)."""
+    now = []
+    for job in pending.values():
+        status = TaskStatus.read(job.folder) or {}
+        if status.get("state") == "running" and status.get("current"):
+            now.append(f"{job.person.name}:{status['current']}")
+    return " ".join(now[:4]) + (" ..." if len(now) > 4 else "")
+
+
 def _gather(ray, pending: dict, bar, report: Callable[[str], None]) -> dict:
-    """Wait for every ref of ``pending`` ({ref: job}); returns {person name: final status}."""
+    """Wait for every ref of ``pending`` ({ref: job}); returns {person name: final status}. The bar shows
+    finished people, failures, and the step each running person is in (as Ray's own progress bars do)."""
     results, failed = {}, 0
     while pending:
-        ready, _ = ray.wait(list(pending), num_returns=1)
+        ready, _ = ray.wait(list(pending), num_returns=1, timeout=2.0)
+        if not ready:
+            bar.set_postfix(failed=failed, now=_running(pending), refresh=True)
+            continue
         job = pending.pop(ready[0])
         try:
             status = ray.get(ready[0])
@@ -112,7 +126,7 @@ def _gather(ray, pending: dict, bar, report: Callable[[str], None]) -> dict:
         results[job.person.name] = status
         failed += status["state"] != "done"
         bar.update(1)
-        bar.set_postfix(running=len(pending), failed=failed)
+        bar.set_postfix(failed=failed, now=_running(pending))
         tail = f": {status['error']}" if status.get("error") else ""
         report(f"[batch] {job.person.name} {status['state']} ({status.get('seconds', 0):.0f} s){tail}")
     return results

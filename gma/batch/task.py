@@ -51,6 +51,8 @@ def run_person(job: PersonJob) -> dict:
         for step in job.batch.steps:
             if _step_current(job, status, step):
                 continue
+            status.data["current"] = step  # what the progress display shows while it runs
+            status.save()
             t0 = time.perf_counter()
             try:
                 facts = STEPS[step](job)
@@ -62,6 +64,7 @@ def run_person(job: PersonJob) -> dict:
         status.data["steps"][step] = {"state": "failed"}
         status.finish("failed", f"{step}: {message}", traceback.format_exc())
         return status.data
+    status.data["current"] = None
     status.finish("done")
     return status.data
 
