@@ -254,6 +254,7 @@ def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_
     _same_avatar(tmp_path / "out" / "p3" / "avatar.gma", p3.model.state_dict())
     status = json.loads((tmp_path / "out" / "p3" / "status.json").read_text())
     assert status["steps"]["fit"]["decoders"].endswith("decoders.gma")
+    assert "Shared decoders (phase 1, p1,p2): done" in (tmp_path / "out" / "summary.md").read_text()
 
 
 @pytest.mark.slow
@@ -268,3 +269,13 @@ def test_decoders_from_one_person(people, ray_runtime, tmp_path):
     assert (out / "_shared" / "p1.gma").is_file()
     fit = json.loads((out / "p2" / "status.json").read_text())["steps"]["fit"]
     assert fit["decoders"] == str(out / "_shared" / "p1.gma")
+
+
+@pytest.mark.slow
+def test_failed_phase1_fails_everyone_with_its_reason(people, ray_runtime, tmp_path):
+    from gma.batch.runner import run_batch
+
+    rows = run_batch([people["broken"], people["p1"], people["p2"]], tmp_path / "out",
+                     _batch(steps=("fit",), train_decoders=2), preset("quick", **TINY), progress=False)
+    assert [r["status"] for r in rows] == ["failed"] * 3
+    assert all(r["error"].startswith("shared decoders:") and "body.npz" in r["error"] for r in rows)

@@ -23,7 +23,7 @@ from gma.batch.config import BatchConfig, Person
 from gma.batch.status import TaskStatus
 from gma.batch.steps import PersonJob
 from gma.batch.summary import summary_rows, write_summary
-from gma.batch.task import is_finished, run_person, run_shared_decoders
+from gma.batch.task import SHARED_DIR, is_finished, run_person, run_shared_decoders
 from gma.core.atomic import atomic_write_json
 from gma.core.errors import InputError, OutputError
 from gma.train.config import FitConfig
@@ -179,8 +179,17 @@ def run_batch(inputs: list[Person], out: str | Path, batch: BatchConfig, fit: Fi
         if started_here:
             ray.shutdown()
     rows = summary_rows(out, [jobs[p.name] for p in inputs])
-    write_summary(out, rows)
+    write_summary(out, rows, _shared_note(out) if subset else [])
     return rows
+
+
+def _shared_note(out: Path) -> list[str]:
+    """A line on phase 1 for the summary: its time is nobody's row."""
+    status = TaskStatus.read(out / SHARED_DIR)
+    if status is None:
+        return []
+    return [f"Shared decoders (phase 1, {status['source']}): {status['state']} in {status.get('seconds', 0):.0f} s"
+            + (f"; {status['error']}" if status.get("error") else "") + "."]
 
 
 def _phase1(ray, opts: dict, subset: list[PersonJob], jobs: dict, fit: FitConfig, report) -> dict:
@@ -190,12 +199,19 @@ def _phase1(ray, opts: dict, subset: list[PersonJob], jobs: dict, fit: FitConfig
         only_import = dataclasses.replace(subset[0].batch, steps=("import",))
         refs = [ray.remote(run_person).options(**opts).remote(dataclasses.replace(j, batch=only_import))
                 for j in subset]
-        for job, status in zip(subset, ray.get(refs), strict=True):
+        try:
+            statuses = ray.get(refs)
+        except Exception as exc:  # a worker lost during the import
+            return _fail_all(jobs, f"shared decoders: worker lost during the import ({type(exc).__name__})", report)
+        for job, status in zip(subset, statuses, strict=True):
             if status["state"] != "done":
                 return _fail_all(jobs, f"shared decoders: {job.person.name} could not be imported "
                                        f"({status['error']})", report)
     report(f"[batch] phase 1: shared decoders over {', '.join(j.person.name for j in subset)}")
-    shared = ray.get(ray.remote(run_shared_decoders).options(**opts).remote(subset))
+    try:
+        shared = ray.get(ray.remote(run_shared_decoders).options(**opts).remote(subset))
+    except Exception as exc:  # the worker of phase 1 died; its fit resumes from its checkpoint next time
+        return _fail_all(jobs, f"shared decoders: worker lost ({type(exc).__name__})", report)
     if shared["state"] != "done":
         return _fail_all(jobs, shared["error"], report)
     for job in jobs.values():
@@ -211,6 +227,9 @@ def _fail_all(jobs: dict, error: str, report) -> dict:
     report(f"[batch] {error}; no one is fitted")
     results = {}
     for name, job in jobs.items():
+        if is_finished(job):  # done in an earlier run: its avatar stands
+            results[name] = TaskStatus.read(job.folder)
+            continue
         job.folder.mkdir(parents=True, exist_ok=True)
         status = TaskStatus(job.folder, name, job.person.source)
         status.finish("failed", error)

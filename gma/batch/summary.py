@@ -38,20 +38,22 @@ def _cell(value) -> str:
     return str(value)
 
 
-def format_markdown(rows: list[dict]) -> str:
+def format_markdown(rows: list[dict], notes: list[str] = ()) -> str:
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     for r in rows:
         lines.append("| " + " | ".join(_cell(r[c]).replace("|", "\\|") for c in COLUMNS) + " |")
     done = sum(r["status"] == "done" for r in rows)
     lines.append("")
     lines.append(f"{done} of {len(rows)} people done; {len(rows) - done} failed or pending.")
+    lines.extend(notes)
     return "\n".join(lines) + "\n"
 
 
-def write_summary(out: str | Path, rows: list[dict]) -> None:
+def write_summary(out: str | Path, rows: list[dict], notes: list[str] = ()) -> None:
+    """``OUT/summary.csv`` (one row per person) and ``OUT/summary.md`` (the table, then ``notes``)."""
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=COLUMNS, lineterminator="\n")
     writer.writeheader()
     writer.writerows({c: _cell(r[c]) for c in COLUMNS} for r in rows)
     atomic_write_bytes(Path(out) / "summary.csv", buf.getvalue().encode())
-    atomic_write_bytes(Path(out) / "summary.md", format_markdown(rows).encode())
+    atomic_write_bytes(Path(out) / "summary.md", format_markdown(rows, notes).encode())
