@@ -279,3 +279,34 @@ def test_failed_phase1_fails_everyone_with_its_reason(people, ray_runtime, tmp_p
                      _batch(steps=("fit",), train_decoders=2), preset("quick", **TINY), progress=False)
     assert [r["status"] for r in rows] == ["failed"] * 3
     assert all(r["error"].startswith("shared decoders:") and "body.npz" in r["error"] for r in rows)
+
+
+@pytest.mark.slow
+def test_an_interrupted_command_resumes(people, ray_runtime, single, tmp_path):
+    """``gma batch`` (joining the test's runtime with --address) stopped by Ctrl-C mid-fit exits 130 and
+    leaves the person running; the same batch again resumes the fit from its checkpoint."""
+    import subprocess
+    from pathlib import Path
+
+    from gma.batch.runner import run_batch
+
+    out = tmp_path / "out"
+    repo = Path(__file__).resolve().parents[1]
+    options = ["--resolution", "48", "--checkpoint-every", "1", "--log-every", "1", "--preview-every", "0",
+               "--stage1-steps", "3", "--stage2-steps", "3", "--avatar.feature-dim", "8", "--avatar.fine-per-face", "1"]
+    cmd = [sys.executable, "-m", "gma.cli", "batch", people["p1"].source, "-o", str(out), "--steps", "fit", "--quiet",
+           "--address", ray_runtime.get_runtime_context().gcs_address, *options]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(cmd, cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ckpt = out / "p1" / "avatar.fit" / "checkpoint.safetensors"
+    deadline = time.monotonic() + 240
+    while not ckpt.is_file() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGINT)
+    output, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, output[-2000:]
+    assert json.loads((out / "p1" / "status.json").read_text())["state"] == "running"
+
+    rows = run_batch([people["p1"]], out, _batch(steps=("fit",)), preset("quick", **TINY), progress=False)
+    assert rows[0]["status"] == "done" and 0 < rows[0]["resumed_from"] < 6
+    _same_avatar(out / "p1" / "avatar.gma", single["p1"][0])
