@@ -19,7 +19,8 @@ import pytest
 import torch
 
 from gma.batch import BatchConfig, find_people
-from gma.batch.runner import check_batch_folder, import_ray
+from gma.batch.cluster import import_ray
+from gma.batch.runner import check_batch_folder
 from gma.batch.steps import PersonJob, export_step
 from gma.batch.summary import format_markdown
 from gma.core.errors import GmaError, InputError, MissingFileError
@@ -149,7 +150,7 @@ def people(tmp_path_factory, gpu, anny_body):
 def ray_runtime():
     """One local runtime for the module (2 CPUs, no dashboard), shut down at its end."""
     ray = pytest.importorskip("ray")
-    from gma.batch.runner import runtime_env
+    from gma.batch.cluster import runtime_env
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env=runtime_env())
     yield ray

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from tqdm import tqdm
 
-import gma
+from gma.batch.cluster import import_ray, runtime_env
 from gma.batch.config import BatchConfig, Person
 from gma.batch.status import TaskStatus
 from gma.batch.steps import PersonJob
@@ -28,29 +27,9 @@ from gma.core.atomic import atomic_write_json
 from gma.core.errors import InputError, OutputError
 from gma.train.config import FitConfig
 
-__all__ = ["check_batch_folder", "import_ray", "run_batch", "runtime_env"]
+__all__ = ["check_batch_folder", "run_batch"]
 
 BATCH_FILE = "batch.json"
-
-
-def import_ray():
-    """Ray, or a one-line error saying how to get it (it is the optional extra ``gma[cluster]``)."""
-    try:
-        import ray
-    except ImportError:
-        raise InputError("gma batch needs Ray: pip install 'gma[cluster]' (or pip install 'ray>=2.9')") from None
-    return ray
-
-
-def runtime_env() -> dict:
-    """What Ray workers need to import this GMA. An installed GMA is found by every worker already; a
-    checkout (``gma/`` next to ``pyproject.toml``) is put on the workers' PYTHONPATH, which reaches
-    workers on other machines only when the checkout lies at the same path there (a shared filesystem)."""
-    root = Path(gma.__file__).resolve().parents[1]
-    if not (root / "pyproject.toml").is_file():
-        return {}
-    paths = [str(root)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-    return {"env_vars": {"PYTHONPATH": os.pathsep.join(dict.fromkeys(paths))}}
 
 
 def check_batch_folder(out: Path, batch: BatchConfig, fit: FitConfig, people: list[Person]) -> None:

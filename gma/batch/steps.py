@@ -14,11 +14,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from gma.batch.config import BatchConfig, Person
-from gma.core.atomic import atomic_write_bytes
-from gma.train.config import FitConfig
+import numpy as np
+from safetensors import safe_open
 
-__all__ = ["OUTPUTS", "STEPS", "PersonJob", "StepSkipped"]
+from gma.avatar import Avatar
+from gma.avatar.gpu import AvatarRenderer
+from gma.avatar.video import orbit_cameras, write_video
+from gma.batch.config import BatchConfig, Person
+from gma.body import load_body
+from gma.core.atomic import atomic_write_bytes
+from gma.data import read_sequence
+from gma.gpu import get_context
+from gma.train.config import FitConfig
+from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
+from gma.train.outputs import CHECKPOINT_NAME, prepare_fit_outputs
+from gma.train.trainer import Trainer, work_dir
+from gma.video import VideoImportConfig, estimate_sequence
+
+__all__ = ["OUTPUTS", "STEPS", "PersonJob", "StepSkipped", "worker_body", "worker_context"]
 
 
 class StepSkipped(Exception):
@@ -44,20 +57,16 @@ class PersonJob:
         return self.person.avatar(self.out)
 
     def sequence(self):
-        from gma.data import read_sequence
-
         return read_sequence(self.person.sequence(self.out))
 
 
-def _body(name: str = "anny"):
-    from gma.body import load_body
-
+def worker_body(name: str = "anny"):
+    """The body model, loaded once per worker process (``load_body`` caches it) and kept for later people."""
     return load_body(name)  # created once per worker process and cached there
 
 
-def _ctx():
-    from gma.gpu import get_context
-
+def worker_context():
+    """The worker's GPU context, created on first use and kept for later people."""
     return get_context()
 
 
@@ -66,8 +75,6 @@ def import_step(job: PersonJob) -> dict:
     estimated; its resumable work in ``sequence.work/``). A sequence is used where it is."""
     if job.person.kind == "sequence":
         raise StepSkipped("already a sequence")
-    from gma.video import VideoImportConfig, estimate_sequence
-
     target = job.person.sequence(job.out)
     seq, report = estimate_sequence(job.person.source, target, config=VideoImportConfig(), overwrite=True,
                                     progress=False)
@@ -76,8 +83,6 @@ def import_step(job: PersonJob) -> dict:
 
 def _checkpoint_step(checkpoint: Path) -> int:
     """The step an interrupted fit's checkpoint holds (0 when none or unreadable)."""
-    from safetensors import safe_open
-
     try:
         with safe_open(str(checkpoint), "pt") as f:
             return int(json.loads(f.metadata()["meta"])["step"])
@@ -88,9 +93,6 @@ def _checkpoint_step(checkpoint: Path) -> int:
 def fit_step(job: PersonJob) -> dict:
     """``gma fit SEQ -o avatar.gma --resume`` (with ``--decoders`` in phase 2 of a shared-decoder batch),
     or, for a person of the decoder subset, the avatar that phase 1 fitted."""
-    from gma.train.outputs import CHECKPOINT_NAME, prepare_fit_outputs
-    from gma.train.trainer import Trainer, work_dir
-
     out = job.avatar_path
     if job.shared_avatar is not None:
         atomic_write_bytes(out, Path(job.shared_avatar).read_bytes())
@@ -98,29 +100,27 @@ def fit_step(job: PersonJob) -> dict:
     seq = job.sequence()
     resumed = _checkpoint_step(work_dir(out) / CHECKPOINT_NAME)
     prepare_fit_outputs(out, [seq], resume=True)  # a batch always continues what an earlier run began
-    trainer = Trainer(job.fit, seq, out, body=_body(job.fit.avatar.body), ctx=_ctx(), progress=False)
+    trainer = Trainer(job.fit, seq, out, body=worker_body(job.fit.avatar.body), ctx=worker_context(),
+                      progress=False)
     avatar = trainer.run(resume=True)
     return {"steps": avatar.info["steps"], "resumed_from": resumed, "fit_seconds": avatar.info["fit_seconds"],
             "decoders": job.fit.decoders or "own", "avatar_bytes": out.stat().st_size}
 
 
 def _avatar(job: PersonJob):
-    from gma.avatar import Avatar
-
-    return Avatar.load(job.avatar_path, body=_body(job.fit.avatar.body))
+    return Avatar.load(job.avatar_path, body=worker_body(job.fit.avatar.body))
 
 
 def eval_step(job: PersonJob) -> dict:
     """``gma eval avatar.gma SEQ --out <name>/eval``: the held-out splits (novel poses, novel views)."""
-    from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
-
     seq = job.sequence()
     splits = [s for s in EVAL_SPLITS if seq.split(s)]
     if not splits:
         raise StepSkipped("the sequence has no test_pose or test_view split")
     avatar = _avatar(job)
     results = evaluate_splits(avatar, seq, splits, job.folder / "eval", job.batch.eval_resolution,
-                              job.fit.background, body=_body(avatar.body_name), ctx=_ctx(), report=None)
+                              job.fit.background, body=worker_body(avatar.body_name), ctx=worker_context(),
+                              report=None)
     facts = {f"{s}_{k}": v for s in splits for k, v in results[s]["mean"].items()}
     if results["geometry"] is not None:
         facts["mesh_mm"] = results["geometry"]["mesh_mm"]
@@ -135,7 +135,7 @@ def export_step(job: PersonJob) -> dict:
     except ImportError:
         raise StepSkipped("gma.export is not installed in this GMA (no 'gma export' command)") from None
     avatar = _avatar(job)
-    body = _body(avatar.body_name)
+    body = worker_body(avatar.body_name)
     pose = export.export_poses(avatar, body, "canonical")[0]
     path = job.folder / "avatar.ply"
     export.write_splats(path, export.posed_splats(avatar, body, pose.params), job.batch.export_format)
@@ -145,13 +145,8 @@ def export_step(job: PersonJob) -> dict:
 def video_step(job: PersonJob) -> dict:
     """A turntable video of the avatar in its canonical pose, as ``gma demo`` makes it: the camera of the
     first training frame, turned about the vertical axis."""
-    import numpy as np
-
-    from gma.avatar.gpu import AvatarRenderer
-    from gma.avatar.video import orbit_cameras, write_video
-
     avatar, seq = _avatar(job), job.sequence()
-    body, ctx, size = _body(avatar.body_name), _ctx(), job.batch.video_size
+    body, ctx, size = worker_body(avatar.body_name), worker_context(), job.batch.video_size
     renderer = AvatarRenderer(ctx, avatar, body)
     K, w2c = seq.cameras.frame(seq.split("train")[0])
     K = np.array(K, np.float32)

@@ -12,8 +12,10 @@ import traceback
 from pathlib import Path
 
 from gma.batch.status import TaskStatus
-from gma.batch.steps import OUTPUTS, STEPS, PersonJob, StepSkipped
+from gma.batch.steps import OUTPUTS, STEPS, PersonJob, StepSkipped, worker_body, worker_context
 from gma.train.config import FitConfig
+from gma.train.outputs import prepare_fit_outputs
+from gma.train.trainer import Trainer, subject_outputs
 
 __all__ = ["SHARED_DIR", "is_finished", "phase1_config", "run_person", "run_shared_decoders", "shared_paths"]
 
@@ -88,10 +90,6 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
     """Phase 1: ``gma fit SEQ1 ... SEQk -o OUT/_shared/fit`` over the people of ``jobs`` (their sequences
     imported already; :func:`phase1_config` steps), resumable like any fit. Returns the status of
     ``OUT/_shared`` with ``avatars``: {person name: avatar file} and ``decoders``: the decoders file."""
-    from gma.batch.steps import _body, _ctx
-    from gma.train.outputs import prepare_fit_outputs
-    from gma.train.trainer import Trainer, subject_outputs
-
     names = [j.person.name for j in jobs]
     target, decoders = shared_paths(jobs[0].out, names)
     status = TaskStatus(jobs[0].out / SHARED_DIR, SHARED_DIR, ",".join(names))
@@ -103,8 +101,8 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
         seqs = [job.sequence() for job in jobs]
         fit = phase1_config(jobs[0].fit, len(jobs))
         prepare_fit_outputs(target, seqs, resume=True)
-        trainer = Trainer(fit, seqs if len(seqs) > 1 else seqs[0], target, body=_body(fit.avatar.body), ctx=_ctx(),
-                          progress=False)
+        trainer = Trainer(fit, seqs if len(seqs) > 1 else seqs[0], target, body=worker_body(fit.avatar.body),
+                          ctx=worker_context(), progress=False)
         trainer.run(resume=True)
         avatars = {name: str(p) for name, p in zip(names, subject_outputs(target, seqs), strict=True)}
         status.data.update(avatars=avatars, decoders=str(decoders))

@@ -47,11 +47,14 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
     from gma.batch import BatchConfig, find_people
-    from gma.batch.runner import import_ray, run_batch
+    from gma.batch.cluster import import_ray
     from gma.batch.summary import format_markdown
     from gma.commands._options import collect_overrides
-    from gma.train.config import preset
+    from gma.core.errors import MissingFileError
+    from gma.train.config import FitConfig, preset
 
     steps = args.steps if isinstance(args.steps, tuple) else _steps(args.steps)
     batch = BatchConfig(steps=steps, train_decoders=args.train_decoders, address=args.address,
@@ -60,16 +63,15 @@ def run(args: argparse.Namespace) -> int:
                         video_frames=args.video_frames, export_format=args.export_format)
     overrides = collect_overrides(args)
     fit = preset(overrides.pop("preset", "quick"), **overrides)
-    if fit.decoders:
-        from pathlib import Path
-
-        from gma.core.errors import MissingFileError
-
+    if fit.decoders:  # workers may run elsewhere: they get the absolute path
         if not Path(fit.decoders).is_file():
             raise MissingFileError(f"{fit.decoders}: decoders file not found")
-        fit = type(fit).from_dict({**fit.to_dict(), "decoders": str(Path(fit.decoders).resolve())})
+        fit = FitConfig.from_dict({**fit.to_dict(), "decoders": str(Path(fit.decoders).resolve())})
     people = find_people(args.inputs)
-    import_ray()  # the one-line error before anything else happens
+    import_ray()  # its one-line error comes before torch and the body model load
+
+    from gma.batch.runner import run_batch
+
     rows = run_batch(people, args.output, batch, fit, progress=not args.quiet)
     print(format_markdown(rows), end="")
     print(f"wrote {args.output}/summary.csv and summary.md")
