@@ -2,7 +2,7 @@
 # Installs what GMA needs on a fresh Debian/Ubuntu machine, skipping what is already there.
 # - a Vulkan driver: Mesa's lavapipe (CPU) when no Vulkan ICD is present, xvfb for window tests;
 # - torch pinned first, so that the CPU wheel is used instead of the multi-GB CUDA build;
-# - this package in editable mode, with the SMPL-X, viewer (Dear ImGui) and dev extras.
+# - this package in editable mode, with the SMPL-X, viewer (Dear ImGui), cluster (Ray, for gma batch) and dev extras.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -36,7 +36,7 @@ fi
 
 stamp=.gma-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-    echo "[install] pip install -e .[smplx,viewer,dev]"
-    "$PY" -m pip install -q -e ".[smplx,viewer,dev]"
+    echo "[install] pip install -e .[smplx,viewer,cluster,dev]"
+    "$PY" -m pip install -q -e ".[smplx,viewer,cluster,dev]"
     touch "$stamp"
 fi
