@@ -237,7 +237,7 @@ def _on_floor(body, pose: torch.Tensor, shape: torch.Tensor) -> torch.Tensor:
     def lowest(p: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
             tr = body.bone_transforms({"pose": p, "shape": shape})[..., feet, :, :]  # [T, F, 4, 4]
-        return (tr[..., 2, :3] @ heads[..., None])[..., 0].add(tr[..., 2, 3]).amin()
+        return ((tr[..., 2, :3] * heads).sum(-1) + tr[..., 2, 3]).amin()
 
     rest_low = lowest(body.canonical_pose()[None])
     out = pose.clone()
