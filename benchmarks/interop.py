@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))  # this checkout's gma, whichever is installed
 
 
 def _tests_module():

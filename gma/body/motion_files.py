@@ -31,7 +31,7 @@ from gma.body.retarget import (
 )
 from gma.core.errors import InputError, MissingFileError
 
-__all__ = ["MOTION_SUFFIXES", "Bvh", "load_motion_file", "parse_bvh", "resample", "save_motion"]
+__all__ = ["MOTION_SUFFIXES", "Bvh", "load_motion_file", "parse_bvh", "place_on_floor", "resample", "save_motion"]
 
 MOTION_SUFFIXES = (".bvh", ".npz")
 # Longest motion read (frames): far above a real clip (an hour at 120 fps), below what exhausts memory.
@@ -228,11 +228,11 @@ def _scale_root(body, root: np.ndarray, src_leg: float | None) -> np.ndarray:
     return scaled
 
 
-def _on_floor(body, pose: torch.Tensor, shape: torch.Tensor) -> torch.Tensor:
+def place_on_floor(body, pose: torch.Tensor, shape: torch.Tensor) -> torch.Tensor:
     """``pose`` [T, J, 4, 4] with the root's height shifted so the lowest foot joint over the clip is at
     its rest-pose height."""
     feet = [body.bone_names.index(n) for n in _FEET if n in body.bone_names]
-    heads = torch.from_numpy(_rest_heads(body)).float()[feet]  # [F, 3]
+    heads = torch.from_numpy(_rest_heads(body, shape)).float()[feet]  # [F, 3]
 
     def lowest(p: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
@@ -304,7 +304,7 @@ def load_motion_file(path: str | Path, body=None, fps: float | None = None, up: 
     pose = torch.eye(4).repeat(len(rot), len(body.bone_names), 1, 1)
     pose[..., :3, :3] = torch.from_numpy(rot).float()
     pose[:, 0, :3, 3] = torch.from_numpy(root).float()
-    pose = _on_floor(body, pose, shape)
+    pose = place_on_floor(body, pose, shape)
     if fps is not None:
         pose = resample(pose, src_fps, fps)
     out_fps = fps or src_fps

@@ -118,9 +118,9 @@ def axes_from_skeleton(left: np.ndarray, up: np.ndarray) -> np.ndarray:
 SMPL_AXES = axes_from_skeleton(np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
 
 
-def _rest_heads(body) -> np.ndarray:
-    """[J, 3] Anny's rest bone heads (m) at the default phenotype."""
-    p = body.canonical_params()
+def _rest_heads(body, shape: torch.Tensor | None = None) -> np.ndarray:
+    """[J, 3] Anny's rest bone heads (m) at phenotype ``shape`` (default: the default phenotype)."""
+    p = body.canonical_params(shape)
     with torch.no_grad():
         rest = body._rest_model(p["shape"][None], p["expression"][None])["rest_bone_poses"][0]
     return rest[:, :3, 3].double().numpy()
