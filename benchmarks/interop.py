@@ -39,10 +39,39 @@ def _cli(*args: str) -> float:
     return time.perf_counter() - start
 
 
+def foot_report(body, motion) -> str:
+    """Root height, how far the lowest foot joint is above the floor (the rest pose's lowest foot joint)
+    and how fast it slides while it is within 2 cm of the floor (foot skate), over a motion."""
+    from gma.body.retarget import _rest_heads
+
+    feet = [body.bone_names.index(n) for n in ("foot.L", "foot.R", "toe3-1.L", "toe3-1.R")]
+    heads = torch.from_numpy(_rest_heads(body, motion.shape)).float()[feet]
+
+    def posed(pose):
+        with torch.no_grad():
+            tr = body.bone_transforms({"pose": pose, "shape": motion.shape})[..., feet, :, :]
+        return ((tr[..., :3, :3] @ heads[:, :, None])[..., 0] + tr[..., :3, 3]).numpy()
+
+    floor = posed(body.canonical_pose()[None])[0, :, 2].min()
+    p = posed(motion.pose)  # [T, F, 3]
+    low = p[..., 2].min(1) - floor
+    idx = p[..., 2].argmin(1)
+    lowest = p[np.arange(len(p)), idx]
+    same = idx[1:] == idx[:-1]
+    planted = same & (low[1:] < 0.02) & (low[:-1] < 0.02)
+    slide = np.linalg.norm(lowest[1:, :2] - lowest[:-1, :2], axis=1) * motion.fps
+    root = motion.pose[:, 0, 2, 3].numpy()
+    skate = f"{np.median(slide[planted]):.3f} m/s median over {planted.sum()} planted steps" if planted.any() \
+        else "no planted frames"
+    return (f"{len(motion)} frames at {motion.fps:g} fps: root height {root.min():+.3f}..{root.max():+.3f} m; "
+            f"lowest foot joint {low.min() * 100:.1f}..{low.max() * 100:.1f} cm above the floor; foot skate {skate}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("avatar", nargs="?")
     ap.add_argument("--size", type=int, default=256)
+    ap.add_argument("--motion", action="append", default=[], help="also report feet and root of this motion file")
     args = ap.parse_args()
     from gma.avatar import Avatar, AvatarConfig
     from gma.avatar.gpu import AvatarRenderer
@@ -98,6 +127,11 @@ def main() -> None:
     err = tm.amass_direction_errors(body, tmp / "a.npz", tm.amass_expected(body))
     print(f"AMASS/SMPL-X retarget limb direction error (4 posed limbs): mean {err.mean():.2f} deg, "
           f"max {err.max():.2f} deg")
+    from gma.body.motion_files import load_motion_file
+
+    for label, m in [("test BVH", load_motion_file(tmp / "m.bvh", body)),
+                     ("built-in walk", walk)] + [(f, load_motion_file(f, body)) for f in args.motion]:
+        print(f"{label}: {foot_report(body, m)}")
     print(f"outputs in {tmp}")
 
 

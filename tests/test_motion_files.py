@@ -242,3 +242,29 @@ def test_bad_bvh_is_named(tmp_path, text, msg):
     (tmp_path / "b.bvh").write_text(text)
     with pytest.raises(InputError, match=msg):
         parse_bvh(tmp_path / "b.bvh")
+
+
+@pytest.mark.slow
+def test_import_motion_cli_writes_an_anny_motion(anny_body, tmp_path):
+    from gma.body.motion_files import load_motion_file
+    from gma.cli import main
+
+    write_bvh(tmp_path / "m.bvh")
+    assert main(["import", "motion", str(tmp_path / "m.bvh"), str(tmp_path / "m.npz"), "--fps", "30"]) == 0
+    saved = load_motion_file(tmp_path / "m.npz", anny_body)
+    direct = load_motion_file(tmp_path / "m.bvh", anny_body, fps=30)
+    assert saved.fps == 30 and len(saved) == len(direct) == 2
+    torch.testing.assert_close(saved.pose, direct.pose)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name,down", [("tpose", 0.0), ("apose", 45.0)])
+def test_named_poses_hold_the_arms(anny_body, name, down):
+    from gma.body.retarget import reference_pose
+
+    heads = posed_heads(anny_body, reference_pose(anny_body, name)["pose"][None])[0]
+    b = anny_body.bone_names
+    for side, sign in (("L", 1.0), ("R", -1.0)):
+        for a, c in ((f"upperarm01.{side}", f"lowerarm01.{side}"), (f"lowerarm01.{side}", f"wrist.{side}")):
+            want = np.array([sign * np.cos(np.radians(down)), 0.0, -np.sin(np.radians(down))])
+            assert angle_deg(heads[b.index(c)] - heads[b.index(a)], want) < 2.0
