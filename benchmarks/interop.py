@@ -42,10 +42,10 @@ def _cli(*args: str) -> float:
 def foot_report(body, motion) -> str:
     """Root height, how far the lowest foot joint is above the floor (the rest pose's lowest foot joint)
     and how fast it slides while it is within 2 cm of the floor (foot skate), over a motion."""
-    from gma.body.retarget import _rest_heads
+    from gma.body.retarget import rest_heads
 
     feet = [body.bone_names.index(n) for n in ("foot.L", "foot.R", "toe3-1.L", "toe3-1.R")]
-    heads = torch.from_numpy(_rest_heads(body, motion.shape)).float()[feet]
+    heads = torch.from_numpy(rest_heads(body, motion.shape)).float()[feet]
 
     def posed(pose):
         with torch.no_grad():

@@ -68,9 +68,9 @@ def write_bvh(path, frames=BVH_FRAMES, roots=BVH_ROOT, frame_time=1 / 60):
 
 def posed_heads(body, pose: torch.Tensor) -> np.ndarray:
     """[T, J, 3] posed bone heads of Anny for poses [T, J, 4, 4]."""
-    from gma.body.retarget import _rest_heads
+    from gma.body.retarget import rest_heads
 
-    heads = torch.from_numpy(_rest_heads(body)).float()
+    heads = torch.from_numpy(rest_heads(body)).float()
     with torch.no_grad():
         tr = body.bone_transforms({"pose": pose, "shape": body.param_spaces["shape"].default_tensor()})
     return ((tr[..., :3, :3] @ heads[:, :, None])[..., 0] + tr[..., :3, 3]).numpy()
@@ -182,9 +182,9 @@ AMASS_POSES = {4: (1.0, 0.0, 0.0), 19: (0.0, 1.2, 0.0), 16: (0.0, 0.0, -0.6), 1:
 
 def amass_expected(body) -> dict[tuple[str, str], np.ndarray]:
     """Where the limbs of AMASS_POSES point in Anny's world (Anny axes = SMPL's turned upright)."""
-    from gma.body.retarget import _rest_heads
+    from gma.body.retarget import rest_heads
 
-    heads = _rest_heads(body)
+    heads = rest_heads(body)
     b = body.bone_names
 
     def rx(a):

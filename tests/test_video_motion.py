@@ -17,9 +17,9 @@ LIMBS = (("upperarm01.L", "lowerarm01.L"), ("lowerarm01.L", "wrist.L"), ("uppera
 
 def root_frame_limbs(body, pose: torch.Tensor) -> np.ndarray:
     """[T, L, 3] unit limb directions in the root's own frame (independent of where the body stands)."""
-    from gma.body.retarget import _rest_heads
+    from gma.body.retarget import rest_heads
 
-    heads = torch.from_numpy(_rest_heads(body)).float()
+    heads = torch.from_numpy(rest_heads(body)).float()
     with torch.no_grad():
         tr = body.bone_transforms({"pose": pose, "shape": body.param_spaces["shape"].default_tensor()})
     posed = (tr[..., :3, :3] @ heads[:, :, None])[..., 0] + tr[..., :3, 3]

@@ -25,8 +25,8 @@ from gma.body.retarget import (
     SMPLX_JOINTS,
     SMPLX_PARENTS,
     RetargetRig,
-    _rest_heads,
     axes_from_skeleton,
+    rest_heads,
     smplx_rig,
 )
 from gma.core.errors import InputError, MissingFileError
@@ -219,7 +219,7 @@ def _amass_motion(path: Path, data: dict, body, up: str | None) -> tuple[np.ndar
 def _scale_root(body, root: np.ndarray, src_leg: float | None) -> np.ndarray:
     """[T, 3] source root positions (Anny axes, source units) scaled to Anny's legs (``src_leg`` None:
     already metres on a human) and started at the horizontal origin. Height is settled later."""
-    heads = _rest_heads(body)
+    heads = rest_heads(body)
     b = body.bone_names
     anny_leg = (np.linalg.norm(heads[b.index("lowerleg01.L")] - heads[b.index("upperleg01.L")])
                 + np.linalg.norm(heads[b.index("foot.L")] - heads[b.index("lowerleg01.L")]))
@@ -232,7 +232,7 @@ def place_on_floor(body, pose: torch.Tensor, shape: torch.Tensor) -> torch.Tenso
     """``pose`` [T, J, 4, 4] with the root's height shifted so the lowest foot joint over the clip is at
     its rest-pose height."""
     feet = [body.bone_names.index(n) for n in _FEET if n in body.bone_names]
-    heads = torch.from_numpy(_rest_heads(body, shape)).float()[feet]  # [F, 3]
+    heads = torch.from_numpy(rest_heads(body, shape)).float()[feet]  # [F, 3]
 
     def lowest(p: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():

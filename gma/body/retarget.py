@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["JOINT_MAP", "SMPLX_JOINTS", "RetargetRig", "axes_from_skeleton", "reference_pose", "rotation_between"]
+__all__ = ["JOINT_MAP", "SMPLX_JOINTS", "RetargetRig", "axes_from_skeleton", "reference_pose", "rest_heads",
+           "rotation_between", "smplx_rig"]
 
 # fmt: off
 # The joint mapping, one row per mapped Anny bone:
@@ -118,7 +119,7 @@ def axes_from_skeleton(left: np.ndarray, up: np.ndarray) -> np.ndarray:
 SMPL_AXES = axes_from_skeleton(np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
 
 
-def _rest_heads(body, shape: torch.Tensor | None = None) -> np.ndarray:
+def rest_heads(body, shape: torch.Tensor | None = None) -> np.ndarray:
     """[J, 3] Anny's rest bone heads (m) at phenotype ``shape`` (default: the default phenotype)."""
     p = body.canonical_params(shape)
     with torch.no_grad():
@@ -147,7 +148,7 @@ class RetargetRig:
         ``names`` is which column of :data:`JOINT_MAP` names them ("smplx" or "bvh");
         ``src_rest_dir(src_joint, src_child_joint)`` returns the source's rest bone direction (source
         axes) or None where it is taken to match Anny's."""
-        heads = _rest_heads(body)
+        heads = rest_heads(body)
         bones = body.bone_names
         rows = []
         for anny, smplx, bvh, child in JOINT_MAP:

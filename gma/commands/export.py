@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from gma.core.args import non_negative_int, positive_float, positive_int
-from gma.core.errors import InputError
+from gma.core.errors import InputError, MissingFileError
 from gma.core.outputs import prepare_output_file
 
 SUFFIXES = (".ply", ".glb", ".obj")
@@ -63,8 +63,6 @@ def run(args: argparse.Namespace) -> int:
     if args.every is not None and args.motion is None:
         raise InputError("--every needs --motion FILE")
     if not Path(args.avatar).is_file():
-        from gma.core.errors import MissingFileError
-
         raise MissingFileError(f"{args.avatar}: avatar file not found")
     if args.every is None:  # a single output: check it before loading anything
         prepare_output_file(out, args.force)

@@ -29,7 +29,7 @@ from gma.core.outputs import prepare_output_file
 from gma.video.camera import intrinsics
 from gma.video.detect import detect_frames
 from gma.video.frames import read_video
-from gma.video.pipeline import VideoImportConfig, _fit, work_dir
+from gma.video.pipeline import VideoImportConfig, fit_detections, work_dir
 from gma.video.report import reprojection_errors
 
 __all__ = ["CAMERA_TO_ANNY", "estimate_motion", "upright_motion", "video_fps"]
@@ -85,7 +85,7 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
         if not det.found.any():
             raise InputError(f"{src}: no person detected in any of the {len(frames)} frames")
         K = intrinsics(frames.shape[2], frames.shape[1], cfg.focal)
-        pose, phenotype, info = _fit(det, det.masks, K, cfg, work, anny, progress, timings)
+        pose, phenotype, info = fit_detections(det, det.masks, K, cfg, work, anny, progress, timings)
     except (GmaError, ValueError) as exc:
         if not existed and (not any(work.rglob("*.npz")) or "no person detected" in str(exc)):
             shutil.rmtree(work, ignore_errors=True)
