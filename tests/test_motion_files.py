@@ -117,7 +117,7 @@ def bvh_direction_errors(body, path) -> np.ndarray:
 def test_bvh_limbs_follow_the_source(anny_body, tmp_path):
     write_bvh(tmp_path / "m.bvh")
     err = bvh_direction_errors(anny_body, tmp_path / "m.bvh")
-    assert err.max() < 2.0, err.round(2)
+    assert err.max() < 0.5, err.round(2)
 
 
 @pytest.mark.slow
@@ -210,7 +210,7 @@ def amass_expected(body) -> dict[tuple[str, str], np.ndarray]:
 def test_amass_npz_limbs_follow_the_source(anny_body, tmp_path):
     write_amass(tmp_path / "a.npz", AMASS_POSES)
     err = amass_direction_errors(anny_body, tmp_path / "a.npz", amass_expected(anny_body))
-    assert err.max() < 2.0, err.round(2)
+    assert err.max() < 0.5, err.round(2)
 
 
 @pytest.mark.slow

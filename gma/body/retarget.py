@@ -1,18 +1,21 @@
 """Retargeting skeletal motion from other rigs (SMPL / SMPL-X, BVH) onto Anny's 104-bone rig.
 
 Source rigs of this kind have world-aligned joint frames at rest, and a joint's local rotation turns its
-subtree about world-aligned axes in the parent's posed frame; Anny's ``local-ref`` deltas are the same
-convention (the skinning rotation of bone c is ``G_c = G_parent · D_c``). What differs is (a) the axes
-(Anny: Z up, faces −Y, left +X), (b) the rest pose (Anny rests in an A-pose with bent forearms, SMPL-X
-and most BVH files in a T-pose) and (c) the bone set. So, per mapped Anny bone c with source joint s:
+subtree about world-aligned axes in the parent's posed frame: a joint's world rotation from rest is
+``G_s = G_parent · R_s``. Anny's ``local-ref`` deltas are nearly that convention, but relative to its
+reference bone orientations U rather than its rest orientations R: the skinning rotation of bone c is
+``G_c = G_p · A_p^T · D_c · A_c`` with ``A = U R^T`` (a few degrees from I for some bones, which is why
+identity deltas give Anny's canonical pose rather than exactly its rest pose). What also differs is
+(a) the axes (Anny: Z up, faces −Y, left +X), (b) the rest pose (Anny rests in an A-pose with bent
+forearms, SMPL-X and most BVH files in a T-pose) and (c) the bone set. So, per Anny bone c:
 
-    W_c = C_world · G_s · C_rest^T · Q_c          (Anny world rotation of the bone, from its rest)
-    D_c = W_a^T · W_c                             (a = c's nearest mapped ancestor; bones in between keep I)
+    G_c = C_world · G_s · C_rest^T · Q_c      for a mapped bone with source joint s,
+    G_c = G_parent                            for an unmapped one (twist bones, toes, spine04, …),
+    D_c = A_p · G_p^T · G_c · A_c^T           (the root: D_0 = U_0 · G_0 · R_0 · U_0^T)
 
-``G_s`` is the source joint's world rotation from its rest, ``C_rest`` / ``C_world`` the change of axes of
-the source's rest skeleton / world into Anny's, and ``Q_c`` the smallest rotation that turns Anny's rest
-bone direction onto the source's (both in Anny axes), so that posed limbs point where the source's do.
-Unmapped Anny bones (twist bones, toes, spine04, spine02, …) keep the identity.
+``C_rest`` / ``C_world`` change the axes of the source's rest skeleton / world into Anny's, and ``Q_c`` is
+the smallest rotation that turns Anny's rest bone direction onto the source's (both in Anny axes), so
+that posed limbs point where the source's do.
 """
 
 from __future__ import annotations
@@ -119,27 +122,37 @@ def axes_from_skeleton(left: np.ndarray, up: np.ndarray) -> np.ndarray:
 SMPL_AXES = axes_from_skeleton(np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
 
 
-def rest_heads(body, shape: torch.Tensor | None = None) -> np.ndarray:
-    """[J, 3] Anny's rest bone heads (m) at phenotype ``shape`` (default: the default phenotype)."""
+def _rest_bone_poses(body, shape: torch.Tensor | None = None) -> torch.Tensor:
     p = body.canonical_params(shape)
     with torch.no_grad():
-        rest = body._rest_model(p["shape"][None], p["expression"][None])["rest_bone_poses"][0]
-    return rest[:, :3, 3].double().numpy()
+        return body._rest_model(p["shape"][None], p["expression"][None])["rest_bone_poses"][0].double()
+
+
+def rest_heads(body, shape: torch.Tensor | None = None) -> np.ndarray:
+    """[J, 3] Anny's rest bone heads (m) at phenotype ``shape`` (default: the default phenotype)."""
+    return _rest_bone_poses(body, shape)[:, :3, 3].numpy()
+
+
+def rest_rotations(body, shape: torch.Tensor | None = None) -> np.ndarray:
+    """[J, 3, 3] Anny's rest bone orientations at phenotype ``shape`` (default: the default phenotype)."""
+    return _rest_bone_poses(body, shape)[:, :3, :3].numpy()
 
 
 @dataclass
 class RetargetRig:
-    """A source rig matched to Anny: ``anny_idx`` [M] mapped Anny bones (parents before children),
-    ``src_idx`` [M] their source joints, ``ancestor`` [M] the row of each bone's nearest mapped ancestor
-    (−1 for the root), ``Q`` [M, 3, 3] rest alignments (Anny axes), ``c_rest`` / ``c_world`` [3, 3]."""
+    """A source rig matched to Anny: ``anny_idx`` [M] mapped Anny bones, ``src_idx`` [M] their source
+    joints, ``Q`` [M, 3, 3] rest alignments (Anny axes), ``c_rest`` / ``c_world`` [3, 3], and Anny's
+    ``parents`` [J] (parents before children), ``A`` [J, 3, 3] = U R^T, root ``U0`` / ``R0`` [3, 3]."""
 
     anny_idx: np.ndarray
     src_idx: np.ndarray
-    ancestor: np.ndarray
     Q: np.ndarray
     c_rest: np.ndarray
     c_world: np.ndarray
-    num_bones: int
+    parents: np.ndarray
+    A: np.ndarray
+    U0: np.ndarray
+    R0: np.ndarray
 
     @staticmethod
     def build(body, src_index: dict[str, int], src_rest_dir, c_rest: np.ndarray,
@@ -157,41 +170,38 @@ class RetargetRig:
             if src is not None and anny in bones:
                 rows.append((anny, src, child, candidates))
         row_src = {anny: src for anny, src, _, _ in rows}
-        order = sorted(rows, key=lambda r: _depth(body, bones.index(r[0])))
-        anny_idx = np.array([bones.index(r[0]) for r in order], np.int64)
-        mapped = {int(j): m for m, j in enumerate(anny_idx)}
-        ancestor = np.full(len(order), -1, np.int64)
-        Q = np.tile(np.eye(3), (len(order), 1, 1))
-        for m, (anny, src, child, _) in enumerate(order):
-            p = body.bone_parents[bones.index(anny)]
-            while p >= 0 and p not in mapped:
-                p = body.bone_parents[p]
-            ancestor[m] = mapped.get(p, -1)
+        anny_idx = np.array([bones.index(r[0]) for r in rows], np.int64)
+        Q = np.tile(np.eye(3), (len(rows), 1, 1))
+        for m, (anny, src, child, _) in enumerate(rows):
             if child is not None and child in row_src:
                 d_src = src_rest_dir(src, row_src[child])
                 if d_src is not None:
                     d_anny = heads[bones.index(child)] - heads[bones.index(anny)]
                     Q[m] = rotation_between(d_anny, c_rest @ np.asarray(d_src, np.float64))
-        return RetargetRig(anny_idx, np.array([src_index[r[1]] for r in order], np.int64), ancestor, Q,
-                           c_rest, c_rest if c_world is None else c_world, len(bones))
+        R = rest_rotations(body)
+        U = body.anny_model.reference_bone_orientations.double().numpy()
+        return RetargetRig(anny_idx, np.array([src_index[r[1]] for r in rows], np.int64), Q, c_rest,
+                           c_rest if c_world is None else c_world, np.asarray(body.bone_parents, np.int64),
+                           U @ np.swapaxes(R, -1, -2), U[0], R[0])
 
     def local_deltas(self, src_global: np.ndarray) -> np.ndarray:
         """Anny ``local-ref`` rotations [T, J, 3, 3] from the source joints' world rotations
         ``src_global`` [T, S, 3, 3] (each from its rest, source axes)."""
-        t = src_global.shape[0]
-        g = src_global[:, self.src_idx]  # [T, M, 3, 3]
-        w = self.c_world @ g @ self.c_rest.T @ self.Q  # [T, M, 3, 3] Anny world rotations from rest
-        anc = np.where(self.ancestor[None, :, None, None] >= 0, w[:, np.maximum(self.ancestor, 0)], np.eye(3))
-        out = np.tile(np.eye(3), (t, self.num_bones, 1, 1))
-        out[:, self.anny_idx] = np.swapaxes(anc, -1, -2) @ w
-        return out
-
-
-def _depth(body, j: int) -> int:
-    d = 0
-    while body.bone_parents[j] >= 0:
-        j, d = body.bone_parents[j], d + 1
-    return d
+        t, nb = src_global.shape[0], len(self.parents)
+        target = np.full((t, nb, 3, 3), np.nan)
+        target[:, self.anny_idx] = self.c_world @ src_global[:, self.src_idx] @ self.c_rest.T @ self.Q
+        G = np.empty((t, nb, 3, 3))
+        D = np.empty((t, nb, 3, 3))
+        for j, p in enumerate(self.parents):  # parents come first in Anny's bone order
+            if not np.isnan(target[0, j, 0, 0]):
+                G[:, j] = target[:, j]
+            else:
+                G[:, j] = np.eye(3) if p < 0 else G[:, p]
+            if p < 0:
+                D[:, j] = self.U0 @ G[:, j] @ self.R0 @ self.U0.T
+            else:
+                D[:, j] = self.A[p] @ np.swapaxes(G[:, p], -1, -2) @ G[:, j] @ self.A[j].T
+        return D
 
 
 def smplx_rig(body, joints: tuple[str, ...] = SMPLX_JOINTS, c_world: np.ndarray | None = None) -> RetargetRig:
