@@ -228,20 +228,23 @@ def _scale_root(body, root: np.ndarray, src_leg: float | None) -> np.ndarray:
     return scaled
 
 
-def place_on_floor(body, pose: torch.Tensor, shape: torch.Tensor) -> torch.Tensor:
+def place_on_floor(body, pose: torch.Tensor, shape: torch.Tensor, per_frame: bool = False) -> torch.Tensor:
     """``pose`` [T, J, 4, 4] with the root's height shifted so the lowest foot joint over the clip is at
-    its rest-pose height."""
+    its rest-pose height — or, with ``per_frame``, in every frame (a foot always on the floor: right for
+    walking, turning and dancing on the ground, wrong for jumps; it removes the bobbing that a monocular
+    fit's depth noise gives the root)."""
     feet = [body.bone_names.index(n) for n in _FEET if n in body.bone_names]
     heads = torch.from_numpy(rest_heads(body, shape)).float()[feet]  # [F, 3]
 
     def lowest(p: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
             tr = body.bone_transforms({"pose": p, "shape": shape})[..., feet, :, :]  # [T, F, 4, 4]
-        return ((tr[..., 2, :3] * heads).sum(-1) + tr[..., 2, 3]).amin()
+        return ((tr[..., 2, :3] * heads).sum(-1) + tr[..., 2, 3]).amin(-1)  # [T]
 
-    rest_low = lowest(body.canonical_pose()[None])
+    rest_low = lowest(body.canonical_pose()[None])[0]
     out = pose.clone()
-    out[:, 0, 2, 3] += rest_low - lowest(pose)
+    low = lowest(pose)
+    out[:, 0, 2, 3] += rest_low - (low if per_frame else low.min())
     return out
 
 

@@ -136,7 +136,7 @@ def _import_motion(args: argparse.Namespace) -> int:
 
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
     cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
-    motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force)
+    motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force, feet=args.feet)
     if args.fps is not None and abs(args.fps - motion.fps) > 1e-6:
         motion.pose = resample(motion.pose, motion.fps, args.fps)
         motion.expression = motion.expression.new_zeros(len(motion.pose), 52)
@@ -225,6 +225,9 @@ def register(subparsers) -> None:
     mo.add_argument("--force", action="store_true", help="overwrite OUT")
     _range(mo)
     mo.add_argument("--focal", type=positive_float, default=None, help="video: focal length in pixels")
+    mo.add_argument("--feet", choices=("frame", "clip"), default="frame",
+                    help="video: a foot on the floor in every frame (default; steadies the root) or only at the "
+                         "clip's lowest point (keeps jumps)")
     mo.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
                     help="video: body fit steps per stage")
     p.set_defaults(func=_run)

@@ -6,7 +6,9 @@ The fit poses the body in the camera's frame (x right, y down, z forward). A mot
 world (Z up, facing −Y), so the root is turned from one to the other — a person facing the camera faces
 −Y — and then levelled so that the body's mean up direction over the clip is +Z (a tilted camera is
 the usual cause of a lean; this assumes the person stands upright on average). Roots start at the
-horizontal origin and the feet are put on the floor as for retargeted motion files.
+horizontal origin and, by default, a foot is put on the floor in every frame (``feet="frame"``: the fit's
+depth noise makes the root bob by several centimetres otherwise; ``"clip"`` keeps the fitted heights
+and only lifts the clip as a whole, for jumps).
 """
 
 from __future__ import annotations
@@ -63,7 +65,8 @@ def upright_motion(pose: np.ndarray) -> np.ndarray:
 
 
 def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: VideoImportConfig | None = None,
-                    overwrite: bool = False, progress: bool = True, anny=None) -> tuple[Motion, dict]:
+                    overwrite: bool = False, progress: bool = True, anny=None,
+                    feet: str = "frame") -> tuple[Motion, dict]:
     """Fit Anny to the person in video ``src`` and write the motion to ``out`` (an Anny ``body.npz``
     with ``fps``). Returns (motion, report). Detections and the fit are kept in ``OUT.work`` as by
     ``gma import video``, so a second run (or ``gma import video`` of the same clip's settings) reuses them."""
@@ -94,7 +97,9 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
                         "them, delete it to start over)") from None
     body = anny if anny is not None else load_body("anny")
     shape = torch.from_numpy(np.asarray(phenotype, np.float32))
-    posed = place_on_floor(body, torch.from_numpy(upright_motion(pose)).float(), shape)
+    if feet not in ("frame", "clip"):
+        raise InputError(f"feet must be 'frame' or 'clip', got {feet!r}")
+    posed = place_on_floor(body, torch.from_numpy(upright_motion(pose)).float(), shape, per_frame=feet == "frame")
     fps = video_fps(src) / cfg.skip
     motion = Motion(src.stem, posed, torch.zeros(len(posed), 52), shape, fps)
     save_motion(out, motion)
