@@ -121,3 +121,16 @@ def test_series_from_motion(anny_body, avatar_file, tmp_path):
     assert gma_main(["export", str(avatar_file), str(tmp_path / "s.ply"), "--format", "2dgs",
                      "--motion", str(tmp_path / "w.npz"), "--every", "2"]) == 0
     assert sorted(p.name for p in tmp_path.glob("s_*.ply")) == ["s_00000.ply", "s_00002.ply", "s_00004.ply"]
+
+
+def test_flat_axis_stays_the_smallest(tmp_path):
+    """Surfels smaller than the 3DGS thickness keep their own two scales when read back."""
+    from gma.render.ply import load_splat_ply, save_splat_ply
+    from gma.render.scenes import random_scene
+
+    s = random_scene(30, seed=2)
+    s["scales"] = (s["scales"] * 1e-3).astype(np.float32)  # well under 1e-4 m
+    save_splat_ply(tmp_path / "s.ply", s["means"], s["quats"], s["scales"], s["opacities"], s["colors"],
+                   thickness=1e-4)
+    back = load_splat_ply(tmp_path / "s.ply")
+    np.testing.assert_allclose(back["scales"], s["scales"], rtol=1e-4)

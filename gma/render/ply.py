@@ -170,7 +170,9 @@ def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors, th
 
     means [N, 3] (m), quats [N, 4], scales [N, 2] (m, activated), opacities [N] in (0, 1), colors [N, 3] RGB.
     ``thickness`` None writes two scales (the 2DGS layout); a number (m) writes a third, flat-axis scale of
-    that size, so that 3DGS tools that expect three scales show each surfel as a thin disc.
+    that size, so that 3DGS tools that expect three scales show each surfel as a thin disc (capped at half
+    the surfel's smaller scale, so that the flat axis stays the smallest and readers that drop the
+    smallest axis, as :func:`load_splat_ply` does, drop this one).
     """
     if sh_degree not in (0, 3):
         raise ValueError(f"sh_degree must be 0 or 3, got {sh_degree}")
@@ -178,7 +180,8 @@ def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors, th
     n = len(means)
     scales = np.asarray(scales, np.float64)
     if thickness is not None:
-        scales = np.concatenate([scales, np.full((n, 1), float(thickness))], 1)
+        flat = np.minimum(float(thickness), 0.5 * scales.min(1, initial=np.inf)) if n else np.zeros(0)
+        scales = np.concatenate([scales, flat[:, None]], 1)
     rest = 45 if sh_degree == 3 else 0
     props = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(rest)]
              + ["opacity"] + [f"scale_{i}" for i in range(scales.shape[1])] + [f"rot_{i}" for i in range(4)])
