@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from gma.core.errors import InputError
+
 __all__ = ["JOINT_MAP", "SMPLX_JOINTS", "RetargetRig", "axes_from_skeleton", "reference_pose", "rest_heads",
            "rotation_between", "smplx_rig"]
 
@@ -221,9 +223,9 @@ def reference_pose(body, name: str) -> dict[str, torch.Tensor]:
     if name == "canonical":
         return {"pose": pose}
     if name not in ("tpose", "apose"):
-        raise ValueError(f"unknown pose {name!r}; expected canonical, tpose or apose")
+        raise InputError(f"unknown pose {name!r}; expected canonical, tpose or apose")
     if body.name != "anny":
-        raise ValueError(f"named poses other than canonical are for the Anny rig, not {body.name!r}")
+        raise InputError(f"--pose {name} is for avatars on the Anny rig, not {body.name!r} (use canonical)")
     rig = smplx_rig(body)
     g = np.tile(np.eye(3), (1, len(SMPLX_JOINTS), 1, 1))
     if name == "apose":  # the shoulders lower the arms 45° about the forward axis (SMPL +Z)

@@ -58,6 +58,8 @@ def run(args: argparse.Namespace) -> int:
     fmt = args.format or ("3dgs" if suffix == ".ply" else "mesh")
     if fmt != "mesh" and suffix != ".ply":
         raise InputError(f"{out}: --format {fmt} writes a splat .ply")
+    if args.texture and fmt != "mesh":
+        raise InputError(f"--texture is for mesh exports; {out} is a {fmt} splat file")
     if args.texture > 8192:
         raise InputError(f"--texture {args.texture}: at most 8192")
     if args.every is not None and args.motion is None:
