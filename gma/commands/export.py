@@ -39,7 +39,8 @@ def register(subparsers) -> None:
                    help="motion file (.bvh, AMASS/SMPL-X .npz, an Anny motion or sequence body.npz)")
     p.add_argument("--frame", type=non_negative_int, default=None,
                    help="this frame of --motion (or of the avatar's fitted sequence)")
-    p.add_argument("--every", type=positive_int, default=None, help="every K-th frame of --motion, as OUT_NNNNN.ext")
+    p.add_argument("--every", type=positive_int, default=None,
+                   help="every K-th frame of --motion, as OUT_NNNNN.ext (--motion without --frame: every frame)")
     p.add_argument("--texture", type=non_negative_int, default=0,
                    help="mesh: bake the colours into an N×N texture on the body's UVs (0: vertex colours)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
@@ -66,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--every needs --motion FILE")
     if not Path(args.avatar).is_file():
         raise MissingFileError(f"{args.avatar}: avatar file not found")
-    if args.every is None:  # a single output: check it before loading anything
+    series = args.every is not None or (args.motion is not None and args.frame is None)
+    if not series:  # a single output: check it before loading anything
         prepare_output_file(out, args.force)
 
     from gma.avatar.avatar import Avatar
@@ -79,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     body = load_body(avatar.body_name)
     poses = export_poses(avatar, body, args.pose, args.motion, args.frame, args.every, args.avatar)
     paths = _outputs(out, [p.label for p in poses])
-    if args.every is not None:
+    if series:
         for path in paths:
             prepare_output_file(path, args.force)
     decoded = avatar.decode()
