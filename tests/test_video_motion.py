@@ -62,3 +62,18 @@ def test_motion_from_synthetic_video(tmp_path, gpu, anny_body):
     assert err.mean() < LIMB_DEG, f"mean limb error {err.mean():.1f} deg (per limb {err.mean(0).round(1)})"
     # Upright in Anny's world: the root's up axis close to +Z on average, feet on the floor.
     assert float(motion.pose[:, 0, 2, 2].mean()) > 0.9
+
+
+def test_no_person_is_a_clear_error(tmp_path):
+    pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
+    import imageio.v3 as iio
+
+    from gma.video.motion import estimate_motion
+
+    clip = tmp_path / "empty_room.mp4"
+    rng = np.random.default_rng(0)
+    frames = np.clip(120 + rng.normal(0, 3, (4, 64, 64, 3)), 0, 255).astype(np.uint8)
+    iio.imwrite(clip, frames, fps=5, codec="libx264", macro_block_size=16)
+    with pytest.raises(ValueError, match="no person detected"):
+        estimate_motion(clip, tmp_path / "m.npz", progress=False)
+    assert not (tmp_path / "m.npz").exists() and not (tmp_path / "m.npz.work").exists()
