@@ -27,6 +27,7 @@ SMOKE: dict[str, list[str] | str] = {
     "fit_presets.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
     "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
+    "interop.py": ["--size", "32"],
     "batch_scaling.py": ["--people", "1", "--size", "32", "--steps", "1", "1", "--out", "{tmp}/out"],
     "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",
 }

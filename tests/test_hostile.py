@@ -161,6 +161,14 @@ def _avatar_without_body(tmp, seq_dir, avatar):
     return ["eval", str(bad), str(seq_dir)]
 
 
+BAD_BVH = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n0\n"
+
+
+def _npz(path: Path, **arrays) -> Path:
+    np.savez(path, **arrays)
+    return path
+
+
 CASES = [
     # gma synth
     Case("synth --force over a user's folder",
@@ -249,6 +257,39 @@ CASES = [
          "--focal", argparse=True),
     Case("import --force over a user's folder",
          lambda t, s, a: ["import", "video", str(a), str(_user_folder(t / "mine")), "--force"], "mine"),
+    # gma import motion
+    Case("import motion from a missing file", lambda t, s, a: ["import", "motion", str(t / "none.bvh"),
+                                                                str(t / "m.npz")], "none.bvh"),
+    Case("import motion to a .txt", lambda t, s, a: ["import", "motion", str(_ply(t / "b.bvh", "x")),
+                                                      str(t / "m.txt")], "m.txt"),
+    Case("import motion from a broken BVH", lambda t, s, a: ["import", "motion", str(_ply(t / "b.bvh", BAD_BVH)),
+                                                              str(t / "m.npz")], "b.bvh"),
+    Case("import motion from an npz with odd poses",
+         lambda t, s, a: ["import", "motion", str(_npz(t / "p.npz", poses=np.zeros((3, 7)))), str(t / "m.npz")],
+         "poses"),
+    Case("import motion from a video that is not one",
+         lambda t, s, a: ["import", "motion", str(_ply(t / "clip.mp4", "not a video")), str(t / "m.npz")],
+         "clip.mp4"),
+    Case("import motion over an existing file",
+         lambda t, s, a: ["import", "motion", str(_ply(t / "b.bvh", BAD_BVH)), str(_ply(t / "m.npz", "old"))],
+         "already exists"),
+    # gma export
+    Case("export to an unknown format", lambda t, s, a: ["export", str(a), str(t / "o.txt")], "o.txt"),
+    Case("export splats to a .glb", lambda t, s, a: ["export", str(a), str(t / "o.glb"), "--format", "2dgs"],
+         "o.glb"),
+    Case("export a missing avatar", lambda t, s, a: ["export", str(t / "none.gma"), str(t / "o.ply")], "none.gma"),
+    Case("export over an existing file", lambda t, s, a: ["export", str(a), str(_ply(t / "o.ply", "old"))],
+         "already exists"),
+    Case("export --every without --motion", lambda t, s, a: ["export", str(a), str(t / "o.ply"), "--every", "2"],
+         "--every"),
+    Case("export a broken BVH's motion",
+         lambda t, s, a: ["export", str(a), str(t / "o.ply"), "--motion", str(_ply(t / "b.bvh", BAD_BVH))], "b.bvh"),
+    Case("export a frame of an avatar without its sequence",
+         lambda t, s, a: ["export", str(a), str(t / "o.ply"), "--frame", "3"], "--motion"),
+    # gma render: stills and motion frames
+    Case("render a .png of many frames", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png")], "o.png"),
+    Case("render --frame without --motion", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png"), "--seconds",
+                                                             "0", "--frame", "3"], "--frame"),
 ]
 
 

@@ -190,3 +190,25 @@ def test_recorder_writes_outputs(gpu, small_body_source, tmp_path, out):
     else:
         frames = iio.imread(tmp_path / out, index=None)
         assert frames.shape[0] == 3 and frames.shape[1:3] == (48, 64)
+
+
+@pytest.mark.gpu
+def test_first_frame_is_complete_and_still_png(gpu, small_body_source, tmp_path):
+    """The first frame of a recording draws every surfel although the renderer starts with too small an
+    intersection capacity (it used to come out with surfels missing), and a .png is one still frame."""
+    import imageio.v3 as iio
+
+    from gma.view import FrameRenderer, Scene
+    from gma.view.record import Recorder
+
+    src = small_body_source
+    path = CameraPath.turntable(OrbitCamera.framing(*src.bounds(), up_axis=src.up_axis), 0.2, turns=0.0)
+    renderer = FrameRenderer(gpu)
+    renderer.rasterizer.isect_capacity_hint = 16  # far too small: the first draw drops intersections
+    Recorder(renderer, Scene(src), tmp_path / "frames", path, 64, 48, fps=10).run()
+    first, second = (iio.imread(p) for p in sorted((tmp_path / "frames").glob("*.png")))
+    np.testing.assert_array_equal(first, second)
+    Recorder(FrameRenderer(gpu), Scene(src), tmp_path / "still.png", path, 64, 48, fps=10, num_frames=1).run()
+    np.testing.assert_array_equal(iio.imread(tmp_path / "still.png"), first)
+    with pytest.raises(ValueError, match="one frame"):
+        Recorder(FrameRenderer(gpu), Scene(src), tmp_path / "many.png", path, 64, 48, fps=10)

@@ -6,7 +6,8 @@ radians, lengths in metres):
 
 - ``anny`` (default, free): ``pose`` [T, 104, 4, 4] Anny ``local-ref`` bone transforms of the default
   rig (bone 0 = root, carries global rotation and translation); ``phenotype`` [6] in [0, 1] (gender,
-  age, muscle, weight, height, proportions); optional ``facial_actions`` [T, 52] in [0, 1].
+  age, muscle, weight, height, proportions); optional ``facial_actions`` [T, 52] in [0, 1]; optional
+  ``fps`` (scalar, frames per second: motion files from ``gma import motion`` carry it).
 - ``smplx``: ``betas`` [B], ``global_orient`` [T, 3], ``body_pose`` [T, 63], ``jaw_pose``,
   ``leye_pose``, ``reye_pose`` [T, 3], ``left_hand_pose``, ``right_hand_pose`` [T, 45],
   ``expression`` [T, E], ``transl`` [T, 3], ``gender`` (string).
@@ -134,6 +135,9 @@ def validate_body(body: SequenceBody, source: str, num_frames: int | None = None
         elif key in ("betas",):
             if value.ndim != 1:
                 raise ValueError(f"{source}: 'betas' has shape {list(value.shape)}, expected [B]")
+        elif key == "fps":
+            if value.ndim != 0 or not float(value) > 0:
+                raise ValueError(f"{source}: 'fps' must be one positive number, got {value.tolist()}")
         elif key == "phenotype":
             if value.shape != (ANNY_PHENOTYPE,):
                 raise ValueError(f"{source}: 'phenotype' has shape {list(value.shape)}, expected [6]")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from gma.core.args import non_negative_int, positive_float, positive_int
-from gma.core.errors import MissingFileError
+from gma.core.errors import InputError, MissingFileError
 
 
 def _common(p: argparse.ArgumentParser, src_help: str) -> None:
@@ -23,6 +23,8 @@ def _range(p: argparse.ArgumentParser) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.format == "motion":
+        return _import_motion(args)
     from gma.data import importers
     from gma.data.sequence import prepare_sequence_output
 
@@ -109,6 +111,44 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     return 0
 
 
+def _import_motion(args: argparse.Namespace) -> int:
+    """A motion file (BVH, AMASS / SMPL-X npz, an Anny motion) retargeted, or a video's motion fitted."""
+    from gma.core.outputs import prepare_output_file
+
+    source, out = Path(args.src), Path(args.out)
+    if not source.exists():
+        raise MissingFileError(f"{source}: not found")
+    if out.suffix.lower() != ".npz":
+        raise InputError(f"{out}: a motion is written as .npz")
+    if source.resolve() == out.resolve():
+        raise InputError(f"{out}: the output would replace the input")
+    prepare_output_file(out, args.force)
+    if source.suffix.lower() in (".bvh", ".npz"):
+        from gma.body.motion_files import load_motion_file, save_motion
+
+        motion = load_motion_file(source, fps=args.fps, up=args.up)
+        save_motion(out, motion)
+        print(f"wrote {out}: {len(motion)} frames at {motion.fps:g} fps, retargeted to Anny from {source}")
+        return 0
+    from gma.body.motion_files import resample, save_motion
+    from gma.video import FitConfig, VideoImportConfig
+    from gma.video.motion import estimate_motion
+
+    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
+    cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
+    motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force, feet=args.feet)
+    if args.fps is not None and abs(args.fps - motion.fps) > 1e-6:
+        motion.pose = resample(motion.pose, motion.fps, args.fps)
+        motion.expression = motion.expression.new_zeros(len(motion.pose), 52)
+        motion.fps = args.fps
+        save_motion(out, motion)
+    err = report["reprojection_error_px_mean"]
+    print(f"wrote {out}: {len(motion)} frames at {motion.fps:g} fps; person detected in "
+          f"{report['frames_detected']}/{report['frames_used']} frames ({report['frames_interpolated']} "
+          "interpolated)" + ("" if err is None else f", reprojection error {err:.1f} px"))
+    return 0
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "import",
@@ -169,4 +209,25 @@ def register(subparsers) -> None:
     masks.add_argument("--mask-video", default=None, help="a video of masks, one per frame")
     masks.add_argument("--mask-dir", default=None, help="a folder of mask images, one per frame")
     vd.add_argument("--model-dir", default=None, help="SMPL/SMPL-X model folder when body.npz uses them")
+
+    mo = fmt.add_parser(
+        "motion", help="a motion for Anny from a BVH, an AMASS / SMPL-X .npz, or a video (gma[video])",
+        description="Writes an Anny motion (.npz: local-ref bone transforms, phenotype, fps) that gma render "
+        "--motion, gma export --motion and the viewer play. BVH (CMU-style joint names) and AMASS / SMPL-X npz "
+        "(poses, trans, mocap_framerate) are retargeted (joint table in gma/body/retarget.py); a video goes "
+        "through the body fit of gma import video (MediaPipe landmarks; no masks or images are written).",
+    )
+    mo.add_argument("src", help=".bvh, AMASS/SMPL-X .npz, or a video file")
+    mo.add_argument("out", help="output motion .npz")
+    mo.add_argument("--fps", type=positive_float, default=None, help="resample to this frame rate")
+    mo.add_argument("--up", choices=("y", "z"), default=None,
+                    help="SMPL-X npz: the world's up axis (default: z for AMASS files, else y)")
+    mo.add_argument("--force", action="store_true", help="overwrite OUT")
+    _range(mo)
+    mo.add_argument("--focal", type=positive_float, default=None, help="video: focal length in pixels")
+    mo.add_argument("--feet", choices=("frame", "clip"), default="frame",
+                    help="video: a foot on the floor in every frame (default; steadies the root) or only at the "
+                         "clip's lowest point (keeps jumps)")
+    mo.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
+                    help="video: body fit steps per stage")
     p.set_defaults(func=_run)

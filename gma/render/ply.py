@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.atomic import atomic_write_bytes
 from gma.core.errors import InputError
 from gma.render.scenes import quat_multiply
 
@@ -154,34 +155,44 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
     return out
 
 
-def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors) -> None:
-    """Write surfels in the INRIA layout (two log scales, opacity logit, f_dc colour), atomically."""
-    import os
-    import tempfile
+def _quat_normals(quats: np.ndarray) -> np.ndarray:
+    """[N, 3] third column of the rotation of unit-or-not quaternions [N, 4] (w, x, y, z): a surfel's normal."""
+    q = np.asarray(quats, np.float64)
+    q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-30)
+    w, x, y, z = q.T
+    return np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], 1)
 
+
+def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors, thickness: float | None = None,
+                   sh_degree: int = 0) -> None:
+    """Write surfels in the INRIA layout, atomically: x y z, nx ny nz (the surfel normal), f_dc_0..2,
+    [f_rest_0..44 all zero when ``sh_degree`` is 3], opacity (logit), scale_* (log), rot_0..3 (w, x, y, z).
+
+    means [N, 3] (m), quats [N, 4], scales [N, 2] (m, activated), opacities [N] in (0, 1), colors [N, 3] RGB.
+    ``thickness`` None writes two scales (the 2DGS layout); a number (m) writes a third, flat-axis scale of
+    that size, so that 3DGS tools that expect three scales show each surfel as a thin disc (capped at half
+    the surfel's smaller scale, so that the flat axis stays the smallest and readers that drop the
+    smallest axis, as :func:`load_splat_ply` does, drop this one).
+    """
+    if sh_degree not in (0, 3):
+        raise ValueError(f"sh_degree must be 0 or 3, got {sh_degree}")
     path = Path(path)
     n = len(means)
-    props = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1"]
-             + [f"rot_{i}" for i in range(4)])
+    scales = np.asarray(scales, np.float64)
+    if thickness is not None:
+        flat = np.minimum(float(thickness), 0.5 * scales.min(1, initial=np.inf)) if n else np.zeros(0)
+        scales = np.concatenate([scales, flat[:, None]], 1)
+    rest = 45 if sh_degree == 3 else 0
+    props = (["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(rest)]
+             + ["opacity"] + [f"scale_{i}" for i in range(scales.shape[1])] + [f"rot_{i}" for i in range(4)])
     o = np.clip(np.asarray(opacities, np.float64), 1e-6, 1 - 1e-6)
     data = np.concatenate([
-        np.asarray(means, np.float64), np.zeros((n, 3)), (np.asarray(colors, np.float64)[:, :3] - 0.5) / SH_C0,
-        np.log(o / (1 - o))[:, None], np.log(np.maximum(np.asarray(scales, np.float64), 1e-12)),
+        np.asarray(means, np.float64), _quat_normals(quats), (np.asarray(colors, np.float64)[:, :3] - 0.5) / SH_C0,
+        np.zeros((n, rest)), np.log(o / (1 - o))[:, None], np.log(np.maximum(scales, 1e-12)),
         np.asarray(quats, np.float64)], 1).astype("<f4")
     prop_lines = "".join(f"property float {p}\n" for p in props)
     header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n{prop_lines}end_header\n"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(header.encode("ascii"))
-            fh.write(data.tobytes())
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_bytes(path, header.encode("ascii") + data.tobytes())
 
 
 def _first_line(exc: Exception) -> str:

@@ -137,7 +137,7 @@ def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale
     if body is not None:
         (pose, phenotype), fit_info = _user_body(body, idx, src), {}
     else:
-        pose, phenotype, fit_info = _fit(det, masks, K, cfg, work, anny, progress, timings)
+        pose, phenotype, fit_info = fit_detections(det, masks, K, cfg, work, anny, progress, timings)
     centre = np.median(pose[:, 0, :3, 3], axis=0)
     pose = pose.copy()
     pose[:, 0, :3, 3] -= centre  # world origin at the person's median root position
@@ -182,8 +182,9 @@ def _user_body(body, idx: list[int], src: Path) -> tuple[np.ndarray, np.ndarray]
     return sel.arrays["pose"], np.asarray(sel.arrays["phenotype"])
 
 
-def _fit(det, masks, K, cfg: VideoImportConfig, work: Path, anny, progress: bool, timings: dict):
-
+def fit_detections(det, masks, K, cfg: VideoImportConfig, work: Path, anny, progress: bool, timings: dict):
+    """Anny fitted to detections ``det`` and ``masks`` [T, H, W] for camera ``K``: (pose [T, J, 4, 4] in
+    the camera's frame, phenotype [6], fit info), cached in ``work`` by its inputs and settings."""
     t0 = time.perf_counter()
     swaps = resolve_swaps(det.pose3d, det.found, det.face)
     p2, p3, h2 = apply_swaps(det.pose2d, det.pose3d, det.hands2d, swaps)

@@ -15,7 +15,9 @@ from pathlib import Path
 
 import torch
 
-from gma.body.motions import MOTIONS, axis_angle_to_matrix, load_anny_motion, motion
+from gma.body.motion_files import load_motion_file
+from gma.body.motions import MOTIONS, axis_angle_to_matrix, motion
+from gma.core.errors import MissingFileError
 from gma.view.source import BodySource
 
 __all__ = ["BodyControls", "load_motion"]
@@ -26,15 +28,16 @@ _THUMB = re.compile(r"^finger1-[23]\.(L|R)$")
 
 
 def load_motion(spec: str, body, frames: int = 120):
-    """A pose sequence: a built-in motion name (``walk``, ...) or a ``body.npz`` / sequence directory."""
+    """A pose sequence: a built-in motion name (``walk``, ...), a motion file (``gma import motion``
+    output, BVH, AMASS / SMPL-X npz) or a ``body.npz`` / sequence directory."""
     if spec in MOTIONS:
         return motion(spec, frames, body)
     path = Path(spec)
     if path.is_dir():
         path = path / "body.npz"
     if not path.is_file():
-        raise FileNotFoundError(f"motion {spec!r}: neither a built-in motion ({', '.join(MOTIONS)}) nor a file")
-    return load_anny_motion(path)
+        raise MissingFileError(f"motion {spec!r}: neither a built-in motion ({', '.join(MOTIONS)}) nor a file")
+    return load_motion_file(path, body)
 
 
 class BodyControls:
@@ -45,7 +48,8 @@ class BodyControls:
         body = source.body
         spaces = body.param_spaces
         self.shape_space, self.expression_space = spaces["shape"], spaces["expression"]
-        self.shape = self.shape_space.default_tensor()
+        avatar = getattr(source, "avatar", None)  # an avatar keeps its own identity under motions
+        self.shape = avatar.shape.clone() if avatar is not None else self.shape_space.default_tensor()
         self.expression = self.expression_space.default_tensor()
         self.hand_curl = [0.0, 0.0]  # left, right in [0, 1]
         self.motion = None

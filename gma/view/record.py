@@ -29,13 +29,14 @@ FRAME_NAME = re.compile(r"\d{6}\.png")
 
 
 def output_kind(path: str | Path) -> str:
-    """"mp4", "gif" or "frames" (a directory) from the output path's suffix."""
+    """"mp4", "gif", "png" (one still image) or "frames" (a directory) from the output path's suffix."""
     suffix = Path(path).suffix.lower()
-    if suffix in (".mp4", ".gif"):
+    if suffix in (".mp4", ".gif", ".png"):
         return suffix[1:]
     if suffix == "":
         return "frames"
-    raise ValueError(f"{path}: unsupported output; use .mp4, .gif or a directory name for PNG frames")
+    raise ValueError(f"{path}: unsupported output; use .mp4, .gif, .png (one frame) or a directory name for PNG "
+                     "frames")
 
 
 def not_a_frames_dir(path: Path) -> str | None:
@@ -70,6 +71,8 @@ class Recorder:
         self.renderer, self.scene, self.out, self.path = renderer, scene, Path(out), path
         self.width, self.height, self.fps = int(width), int(height), float(fps)
         self.num_frames = int(num_frames if num_frames is not None else max(1, round(path.duration * fps) or 1))
+        if self.kind == "png" and self.num_frames != 1:
+            raise ValueError(f"{out}: a .png holds one frame, not {self.num_frames} (use --seconds 0, or .gif/.mp4)")
         self.pose_at = pose_at
         self.frame = 0
         self._gif_frames: list[np.ndarray] = []
@@ -107,7 +110,7 @@ class Recorder:
         image = self.renderer.render_image(self.scene, orbit.camera(self.width, self.height))[..., :3]
         if self.kind == "mp4":
             self._writer.append_data(image)
-        elif self.kind == "gif":
+        elif self.kind in ("gif", "png"):
             self._gif_frames.append(image)
         else:
             import imageio.v3 as iio
@@ -132,6 +135,10 @@ class Recorder:
             import imageio.v3 as iio
 
             iio.imwrite(self._tmp, np.stack(self._gif_frames), extension=".gif", duration=1000.0 / self.fps, loop=0)
+        elif self.kind == "png":
+            import imageio.v3 as iio
+
+            iio.imwrite(self._tmp, self._gif_frames[0], extension=".png")
         # mkstemp/mkdtemp make private files; a rendered video is an ordinary user file.
         umask = os.umask(0)
         os.umask(umask)

@@ -244,8 +244,12 @@ class FrameRenderer:
                 size=(w, h, 1), format=OFFSCREEN_FORMAT,
                 usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC, label="viewer.offscreen")
         view = self._offscreen.create_view()
+        before = self.rasterizer.isect_capacity_hint
         self.draw(scene, camera, view, OFFSCREEN_FORMAT)
-        if complete and scene.options.surfels and self.rasterizer.grow_capacity(self.last_state):
+        # draw() itself grows the capacity every few frames (the first included): a raised hint means this
+        # frame dropped intersections even when grow_capacity has nothing left to report.
+        if complete and scene.options.surfels and (self.rasterizer.grow_capacity(self.last_state)
+                                                   or self.rasterizer.isect_capacity_hint != before):
             self.draw(scene, camera, view, OFFSCREEN_FORMAT)
         return read_texture(self.ctx, self._offscreen)
 
