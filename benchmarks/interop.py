@@ -114,7 +114,8 @@ def main() -> None:
         save_png(tmp / "own.png", own)
         for layout in ("3dgs", "2dgs"):
             _cli("export", path, str(tmp / "rt.ply"), "--format", layout, "--force", *extra)
-            _cli("render-ply", str(tmp / "rt.ply"), "--camera", str(tmp / "cam.json"), "-o", str(tmp / "rt.png"))
+            _cli("render-ply", str(tmp / "rt.ply"), "--camera", str(tmp / "cam.json"), "-o", str(tmp / "rt.png"),
+                 "--force")  # one file, rewritten for each export
             a = iio.imread(tmp / "own.png")[..., :3] / 255.0
             b = iio.imread(tmp / "rt.png")[..., :3] / 255.0
             psnr = 10 * np.log10(1 / max(np.mean((a - b) ** 2), 1e-12))
