@@ -39,6 +39,7 @@ class InvertConfig:
     regularization: float = 1e-3  # λ: pull towards the anchor feature
     damping: float = 1e-3  # initial Levenberg–Marquardt damping (adapted per face)
     scale_weight: float = 4.0  # weight of T_scale's residual against the colour logits' (paint keeps scales)
+    keep_weight: float = 4.0  # weight of an unpainted surfel's colour in a touched face (kept, not blended)
     margin: float = 0.01  # colour targets are clamped to [margin, 1 - margin] (reachable sigmoid range)
     tolerance: float = 1e-3  # a face is done when a step lowers its cost by less than this fraction
     rms_tolerance: float = 0.03  # ... or when its residual RMS per output is below this (raw units:

@@ -75,5 +75,6 @@ def paint_features(model, face_ids: torch.Tensor, colors, weights=None, config: 
     goal = w * col + (1 - w) * torch.sigmoid(raw_c)
     goal = torch.logit(goal.clamp(cfg.margin, 1 - cfg.margin))
     goal = torch.where(w > 0, goal, raw_c)  # untouched surfels: their exact current logits
-    heads = [Head(model.T_color, goal.reshape(m, -1)), Head(model.T_scale, raw_s, cfg.scale_weight)]
+    keep = torch.where(w > 0, 1.0, cfg.keep_weight).expand(m, nk, 3).reshape(m, -1)
+    heads = [Head(model.T_color, goal.reshape(m, -1), keep), Head(model.T_scale, raw_s, cfg.scale_weight)]
     return solve_features(heads, feat, pe, feat, cfg)

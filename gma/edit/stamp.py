@@ -139,9 +139,18 @@ def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.T
     ix = np.floor(np.nan_to_num(px[:, 0], nan=-1.0)).astype(np.int64)
     iy = np.floor(np.nan_to_num(px[:, 1], nan=-1.0)).astype(np.int64)
     inside = (z > 1e-3) & (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+    # Facing the camera (a little slack for the silhouette, where grazing faces show their surfels):
+    # the depth test alone lets through a surface folded within ``tolerance`` behind the visible one
+    # (the inside of the lips, an armpit).
+    tri = view.vertices[view.faces].astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    to_eye = (-R.T @ t) - tri.mean(1)
+    cos = (normal * to_eye).sum(1) / np.maximum(np.linalg.norm(normal, axis=1) * np.linalg.norm(to_eye, axis=1), 1e-20)
+    facing = (cos > -0.1)[face_of_surfel.numpy()]
     visible = np.zeros(len(p), bool)
-    sel = np.nonzero(inside)[0]
+    sel = np.nonzero(inside & facing)[0]
     visible[sel] = z[sel] <= view.ids.depth[iy[sel], ix[sel]] + tolerance
+    sel = np.nonzero(inside)[0]
 
     centre = placement.centre
     if centre is None:
