@@ -159,7 +159,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         return _run(args)
     except (EditError, AvatarFileError, FileNotFoundError, ValueError) as exc:
-        print(f"gma edit: error: {exc}", file=sys.stderr)
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())  # one line
+        print(f"gma edit: error: {text}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
 

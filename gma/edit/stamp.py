@@ -68,7 +68,8 @@ def load_stamp_image(path) -> np.ndarray:
     try:
         img = np.asarray(iio.imread(path))
     except Exception as exc:  # imageio raises many types for a bad file
-        raise EditError(f"cannot read stamp image {path}: {exc}") from None
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise EditError(f"cannot read stamp image {path}: {first}") from None
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, 2)
     if img.ndim != 3 or img.shape[2] not in (3, 4) or min(img.shape[:2]) < 1:
