@@ -108,8 +108,9 @@ def main() -> int:
         ms, _ = _timed(transfer, args.repeats, undo)
         print(f"transfer {what} of 9000 faces (same shape, copy): {ms:.0f} ms median (goal 100)")
 
-    image = np.random.default_rng(0).random((256, 256, 4)).astype(np.float32)
-    image[..., 3] = 1.0
+    yy, xx = np.mgrid[0:256, 0:256] / 255.0  # a logo-like test image: two ramps and a 2x2 checker
+    image = np.stack([xx, ((np.floor(xx * 2) + np.floor(yy * 2)) % 2) * 0.8 + 0.1, 1 - yy, np.ones_like(xx)],
+                     -1).astype(np.float32)
     centre = view.px[torso.numpy()].mean(0)
 
     def stamp():

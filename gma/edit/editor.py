@@ -13,6 +13,7 @@ of the touched faces) and returns a :class:`Change` that names the surfel rows t
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -24,7 +25,7 @@ from gma.edit.invert import InvertConfig
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
 from gma.edit.selection import FaceGraph, Selection
-from gma.edit.stamp import StampPlacement, stamp_targets
+from gma.edit.stamp import StampPlacement, resolve_placement, stamp_targets
 from gma.edit.transfer import WHAT, check_shared_decoders, transfer_features
 from gma.edit.views import named_view, posed_vertices
 
@@ -158,6 +159,16 @@ class Editor:
         placement = placement or StampPlacement()
         nk = self.model.config.fine_per_face
         cand = selection.require().faces if selection is not None else torch.arange(self.num_faces)
+        # Only faces near the image's footprint can be hit: placing and projecting every surfel of the
+        # body would cost more than the solve.
+        cx, cy, size_px = resolve_placement(view, placement, cand)
+        ih, iw = image.shape[:2]
+        reach = 0.5 * size_px * math.hypot(ih, iw) / max(ih, iw) + 4.0  # half-diagonal + a surfel's spread
+        near = np.hypot(view.px[cand.numpy(), 0] - cx, view.px[cand.numpy(), 1] - cy) <= reach
+        cand = cand[torch.from_numpy(near)]
+        if len(cand) == 0:
+            raise EditError("the stamp covers no visible surfel of the selection (check the view, centre and size)")
+        asked, placement = placement, StampPlacement((cx, cy), size_px, "px", placement.rotation)
         rows = (cand[:, None] * nk + torch.arange(nk)).reshape(-1)
         b = self.decoded.binding
         sub = SurfelBinding(b.face_id[rows], b.uv[rows], b.offset[rows], b.scale[rows], b.quat[rows])
@@ -177,8 +188,8 @@ class Editor:
         params = {"image": name, "view": view.name or "camera",
                   "camera": view.camera.to_json() | {"K": np.asarray(view.camera.K).round(6).tolist(),
                                                      "w2c": np.asarray(view.camera.viewmat).round(6).tolist()},
-                  "centre": None if placement.centre is None else [float(v) for v in placement.centre],
-                  "size": placement.size, "unit": placement.unit, "rotation": placement.rotation}
+                  "centre": None if asked.centre is None else [float(v) for v in asked.centre],
+                  "size": asked.size, "unit": asked.unit, "rotation": asked.rotation}
         return self._commit("stamp", params, faces, {"f_tex": new}, info={"iterations": info["iterations"]})
 
     def transfer(self, donor, selection: Selection, what: str = "tex", mode: str = "auto",

@@ -19,7 +19,7 @@ import torch
 from gma.edit.errors import EditError
 from gma.edit.screen import ScreenView
 
-__all__ = ["SHAPES", "StampPlacement", "load_stamp_image", "solid_shape", "stamp_targets"]
+__all__ = ["SHAPES", "StampPlacement", "load_stamp_image", "resolve_placement", "solid_shape", "stamp_targets"]
 
 SHAPES = ("circle", "square", "ring")
 
@@ -117,6 +117,28 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
+def resolve_placement(view: ScreenView, placement: StampPlacement, faces: torch.Tensor,
+                      seen_depths: np.ndarray | None = None) -> tuple[float, float, float]:
+    """(centre x, centre y, size in pixels) of ``placement`` in ``view``; ``faces`` the candidate faces
+    (their visible centroid is the default centre), ``seen_depths`` depths to fall back on when the centre
+    pixel misses the body."""
+    h, w = view.ids.ids.shape
+    centre = placement.centre
+    if centre is None:
+        f = np.unique(np.asarray(faces))
+        on = f[view.visible[f]]
+        centre = view.px[on].mean(0) if len(on) else (w / 2, h / 2)
+    cx, cy = float(centre[0]), float(centre[1])
+    if placement.unit == "px":
+        return cx, cy, placement.size
+    zc = float(view.ids.depth[int(np.clip(cy, 0, h - 1)), int(np.clip(cx, 0, w - 1))])
+    if not np.isfinite(zc) and seen_depths is not None and len(seen_depths):
+        zc = float(np.median(seen_depths))  # the centre misses the body: the depth of what the stamp sees
+    if not np.isfinite(zc):
+        raise EditError("the stamping view sees none of the selected faces")
+    return cx, cy, placement.size * float(view.camera.K[0, 0]) / zc
+
+
 def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.Tensor, image: np.ndarray,
                   placement: StampPlacement, surfel_weight: torch.Tensor | None = None, tolerance: float = 0.015
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -153,21 +175,7 @@ def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.T
     visible[sel] = z[sel] <= view.ids.depth[iy[sel], ix[sel]] + tolerance
     sel = np.nonzero(inside)[0]
 
-    centre = placement.centre
-    if centre is None:
-        faces = np.unique(face_of_surfel.numpy())
-        on = faces[view.visible[faces]]
-        centre = view.px[on].mean(0) if len(on) else (w / 2, h / 2)
-    cx, cy = float(centre[0]), float(centre[1])
-    size_px = placement.size
-    if placement.unit == "m":
-        ic = (int(np.clip(cx, 0, w - 1)), int(np.clip(cy, 0, h - 1)))
-        zc = float(view.ids.depth[ic[1], ic[0]])
-        if not np.isfinite(zc):  # the centre misses the body: use the depth of the seen candidates
-            zc = float(np.median(z[visible])) if visible.any() else float("nan")
-        if not np.isfinite(zc):
-            raise EditError("the stamping view sees none of the selected faces")
-        size_px = placement.size * float(cam.K[0, 0]) / zc
+    cx, cy, size_px = resolve_placement(view, placement, face_of_surfel, z[visible])
     ih, iw = image.shape[:2]
     scale = max(ih, iw) / size_px  # image pixels per screen pixel
     a = math.radians(placement.rotation)
