@@ -84,7 +84,7 @@ class Avatar:
         meta = {"format": AVATAR_FORMAT, "version": str(FORMAT_VERSION), "body": self.body_name,
                 "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
                 "info": json.dumps(self.info)}
-        return save(tensors, metadata=meta)
+        return canonical_safetensors(save(tensors, metadata=meta))
 
     def save(self, path: str | os.PathLike) -> Path:
         """Write the avatar to ``path`` atomically; returns the path."""
@@ -132,6 +132,16 @@ class Avatar:
         except RuntimeError as exc:
             raise AvatarFileError(f"{path}: tensors do not match the avatar config ({exc})") from exc
         return Avatar(model, meta["body"], tensors["shape"].float(), rest, history, info)
+
+
+def canonical_safetensors(data: bytes) -> bytes:
+    """``data`` (a safetensors file) with its JSON header rewritten with sorted keys. safetensors writes
+    the metadata from a hash map whose order changes from call to call; sorted, equal avatars give equal
+    bytes (so undoing every edit gives back the very file)."""
+    n = int.from_bytes(data[:8], "little")
+    header = json.dumps(json.loads(data[8:8 + n]), sort_keys=True, separators=(",", ":")).encode()
+    header += b" " * (-len(header) % 8)  # safetensors pads the header to 8 bytes for aligned tensor data
+    return len(header).to_bytes(8, "little") + header + data[8 + n:]
 
 
 def read_gma(path: Path) -> tuple[dict[str, torch.Tensor], dict[str, str]]:

@@ -34,6 +34,23 @@ class AvatarRenderer:
         self.rasterizer = SurfelRasterizer(ctx)
         self._rest_key = None
 
+    def update_rows(self, rows, mesh: bool = False) -> None:
+        """Upload the surfel rows [R] of ``self.decoded`` that an edit changed (binding and colour; one
+        write per buffer covering the rows' span, not the whole avatar), and with ``mesh`` the mesh layer
+        (the rest vertices are re-uploaded by the next :meth:`set_params`)."""
+        from gma.body.placement import SurfelBinding, pack_surfel_local
+
+        rows = torch.as_tensor(rows, dtype=torch.long)
+        if len(rows):
+            lo, hi = int(rows.min()), int(rows.max()) + 1
+            b = self.decoded.binding
+            span = SurfelBinding(b.face_id[lo:hi], b.uv[lo:hi], b.offset[lo:hi], b.scale[lo:hi], b.quat[lo:hi])
+            packed = pack_surfel_local(span)
+            self.ctx.write(self.poser.surfels_buf, packed, lo * packed.dtype.itemsize)
+            self.ctx.write(self.surfels.colors, self.decoded.colors[lo:hi].numpy().astype(np.float32), lo * 12)
+        if mesh:
+            self._rest_key = None
+
     def set_params(self, params: dict) -> None:
         """Pose for body ``params`` (shape defaults to the avatar's identity): rest vertices are uploaded
         only when shape or expression change, bone transforms every call."""

@@ -230,10 +230,11 @@ class AvatarModel(nn.Module):
         return DecodedAvatar(offsets, binding, colors, opac)
 
     @torch.no_grad()
-    def redecode_faces(self, decoded: DecodedAvatar, face_ids: torch.Tensor) -> torch.Tensor:
+    def redecode_faces(self, decoded: DecodedAvatar, face_ids: torch.Tensor, mesh: bool = True) -> torch.Tensor:
         """Update a fine ``decoded`` in place after an edit of the features of ``face_ids`` [M]; returns the
         surfel indices [M·N_k] that changed (rows of the GPU buffers to rewrite). The mesh layer is
-        recomputed whole: it is one small MLP pass, and a vertex mixes its neighbours' faces."""
+        recomputed whole: it is one small MLP pass, and a vertex mixes its neighbours' faces; ``mesh=False``
+        skips it (an edit of f_tex only cannot move the mesh)."""
         nk = self.config.fine_per_face
         face_ids = torch.as_tensor(face_ids, dtype=torch.long).unique()
         uvd, colors, scales = self.fine_outputs(face_ids)
@@ -242,5 +243,6 @@ class AvatarModel(nn.Module):
         decoded.binding.offset[rows] = uvd[..., 2].reshape(-1)
         decoded.binding.scale[rows] = scales.reshape(-1, 2)
         decoded.colors[rows] = colors.reshape(-1, 3)
-        decoded.vertex_offsets.copy_(self.vertex_offsets())
+        if mesh:
+            decoded.vertex_offsets.copy_(self.vertex_offsets())
         return rows
