@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 import wgpu
 
-from gma.data.synth.mesh_raster import projection_matrix
+from gma.core.camera import Camera
 from gma.gpu import GpuContext
-from gma.render.camera import Camera
+from gma.synth.mesh_raster import projection_matrix
 
 __all__ = ["FaceIdRenderer", "IdImage", "face_id_reference"]
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gma.core.camera import Camera
 from gma.edit.idrender import FaceIdRenderer, IdImage
-from gma.render.camera import Camera
 
 __all__ = ["ScreenView", "face_centres_on_screen", "faces_in_box", "faces_in_lasso", "points_in_polygon",
            "visible_faces"]

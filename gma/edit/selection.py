@@ -241,7 +241,7 @@ class SelectionFile:
 
 def save_selection(path: str | Path, face_ids, body_model: str, num_faces: int, weights=None) -> None:
     """Write the selection as JSON, atomically (a crash leaves the old file or the new one)."""
-    from gma.data.atomic import atomic_write_json
+    from gma.core.atomic import atomic_write_json
 
     ids = np.asarray(face_ids, np.int64).reshape(-1)
     ids, order = np.unique(ids, return_index=True)  # sorted, duplicates dropped

@@ -13,8 +13,8 @@ import math
 import numpy as np
 import torch
 
+from gma.core.camera import Camera
 from gma.edit.errors import EditError
-from gma.render.camera import Camera
 
 __all__ = ["NAMED_VIEWS", "canonical_vertices", "named_view", "posed_vertices"]
 
