@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import viewer_helpers
 
+from gma.edit import Selection
 from gma.view.selection import faces_in_box
 
 small_body_source = viewer_helpers.small_body_source  # fixtures
@@ -80,9 +81,10 @@ def test_box_selection_selects_faces_inside_and_highlights_them(window):
     drag(window, glfw.MOUSE_BUTTON_LEFT, (60, 20), (100, 70))
     state = window.state
     src = state.source
-    expected = np.nonzero(faces_in_box(src.posed_vertices(), src.body.faces.numpy(), state.camera(W, H),
-                                       (60, 20, 100, 70)))[0]
-    assert len(expected) > 0
+    expected = Selection.box(state.edit.view((W, H)), (60, 20, 100, 70)).faces.numpy()
+    in_box = faces_in_box(src.posed_vertices(), src.body.faces.numpy(), state.camera(W, H), (60, 20, 100, 70))
+    assert 0 < len(expected) < in_box.sum()  # only the visible faces of the front-facing ones in the box
+    assert in_box[expected].all()
     np.testing.assert_array_equal(state.scene.selection, expected)
     after = window.screenshot()
     changed = np.abs(after.astype(int) - before.astype(int)).max(-1) > 10

@@ -198,6 +198,35 @@ class EditTools:
             self._face_graph = FaceGraph(self.body.faces)
         return self._face_graph
 
+    # -- what the tools draw over the frame -------------------------------------------------------------
+    def overlays(self, size, tool: str, cursor=None) -> tuple[list[np.ndarray], list]:
+        """(lines, images) to draw over the frame for ``tool`` with the cursor at ``cursor`` (pixels): the
+        brush circle, the stamp preview quad, the donor thumbnail. Pure geometry: no GPU work here."""
+        from gma.view import ScreenImage
+
+        lines, images = [], []
+        w, h = size
+        if tool in ("brush", "paint") and cursor is not None:
+            a = np.linspace(0, 2 * np.pi, 33)
+            r = self.brush.radius
+            lines.append(np.c_[cursor[0] + r * np.cos(a), cursor[1] + r * np.sin(a)].astype(np.float32))
+            if self.brush.falloff > 0:
+                r *= 1 - self.brush.falloff
+                lines.append(np.c_[cursor[0] + r * np.cos(a), cursor[1] + r * np.sin(a)].astype(np.float32))
+        if tool == "stamp" and self.stamp is not None:
+            c = self.stamp.corners(w, h)
+            images.append(ScreenImage(self.stamp.image, c, ("stamp", id(self.stamp.image)), 0.75))
+            lines.append(np.r_[c, c[:1]])
+        if self.donor_thumbnail is not None:
+            th, tw = self.donor_thumbnail.shape[:2]
+            s = min(1.0, 0.3 * h / th)
+            x0, y0 = w - tw * s - 4, h - th * s - 4
+            corners = np.array([[x0, y0], [x0 + tw * s, y0], [x0 + tw * s, y0 + th * s], [x0, y0 + th * s]],
+                               np.float32)
+            images.append(ScreenImage(self.donor_thumbnail, corners, ("donor", id(self.donor_thumbnail))))
+            lines.append(np.r_[corners, corners[:1]])
+        return lines, images
+
     # -- applying changes -----------------------------------------------------------------------------
     def apply(self, change) -> None:
         """Show a :class:`gma.edit.Change` (or a list of them): rewrite the touched rows on the GPU."""
@@ -208,10 +237,10 @@ class EditTools:
             all_rows = torch.cat(rows) if rows else torch.zeros(0, dtype=torch.long)
             self.source.update_rows(all_rows, self.source.decoded.colors, mesh=mesh)
         if any(c.body for c in changes) and self.state.controls is not None:
-            self._sync_body()
+            self.reset_body()
         self.version += 1
 
-    def _sync_body(self) -> None:
+    def reset_body(self) -> None:
         """After a body edit, or its undo: the sliders show the avatar's shape and expression."""
         ctl, av = self.state.controls, self.avatar
         ctl.shape = av.shape.clone()

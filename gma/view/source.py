@@ -188,11 +188,12 @@ class BodySource:
         self._dirty = True
         self.pose_version += 1
 
-    def update_rows(self, rows, colors=None, mesh: bool = False, max_runs: int = 64) -> int:
+    def update_rows(self, rows, colors=None, mesh: bool = False, max_runs: int = 256, gap: int = 16) -> int:
         """Rewrite the surfel rows [R] an edit changed, from ``self.binding`` (edited in place by the edit
         library) and ``colors`` [N, 3] (the full colour table, read at ``rows`` only). Only the touched rows
-        travel: one write per contiguous run of rows (the span from the first to the last row when they
-        are scattered over more than ``max_runs`` runs). With ``mesh`` the rest vertices (which include
+        travel: one write per run of rows (runs less than ``gap`` rows apart are merged: a few untouched
+        rows cost less than another queue write; the span from the first to the last row when more than
+        ``max_runs`` runs remain). With ``mesh`` the rest vertices (which include
         ``vertex_offsets``, edited in place too) are recomputed and uploaded. Pipelines and buffers are kept;
         the next frame re-poses. Returns the bytes written."""
         from gma.body.placement import pack_surfel_local
@@ -200,7 +201,7 @@ class BodySource:
         rows = np.unique(np.asarray(rows, np.int64).reshape(-1))
         written = 0
         if len(rows):
-            breaks = np.nonzero(np.diff(rows) != 1)[0] + 1
+            breaks = np.nonzero(np.diff(rows) > gap)[0] + 1
             starts, ends = np.r_[rows[0], rows[breaks]], np.r_[rows[breaks - 1], rows[-1]] + 1
             if len(starts) > max_runs:
                 starts, ends = starts[:1], ends[-1:]
