@@ -330,6 +330,7 @@ class ViewerWindow:
             self._want_capture = False
         self.context.present()
         self.stats.end_frame()
+        self.update_title(self._stats_text)  # sets the title only when it changes (the dirty marker)
 
     def screenshot(self) -> np.ndarray:
         """Draw a frame and return what was presented: [H, W, 4] uint8 RGBA."""
@@ -348,7 +349,6 @@ class ViewerWindow:
                 self.draw_frame()
                 if self.stats.frame % 60 == 0:
                     self._stats_text = self.stats.summary()
-                self.update_title(self._stats_text)  # sets the title only when it changes (dirty marker)
         finally:
             self.close()
 
