@@ -213,3 +213,19 @@ def test_stamp_corners_follow_the_sampling_rotation():
     # Counter-clockwise on screen (y down): the image's top edge (corners 0 -> 1) now points up.
     d = c[1] - c[0]
     np.testing.assert_allclose(d / np.linalg.norm(d), (0, -1), atol=1e-6)
+
+
+@pytest.mark.slow
+def test_background_edit_shows_a_preview_then_the_solved_rows(avatar_state):
+    s, ed = avatar_state, avatar_state.edit
+    ed.background = True
+    sel = ed.select_box((60, 20, 100, 70), SIZE)
+    ed.set_color((0.0, 1.0, 0.0))
+    assert ed.fill() is None and ed.busy  # returns at once; the solve runs on the worker thread
+    rows = sel.faces.numpy()  # one surfel per face
+    np.testing.assert_allclose(gpu_colors(s)[rows], np.tile([0.0, 1.0, 0.0], (len(rows), 1)), atol=1e-6)
+    ed.undo()  # waits for the fill to land, then takes it back
+    assert not ed.busy and len(s.source.avatar.history) == 0
+    np.testing.assert_array_equal(gpu_colors(s), s.source.decoded.colors.numpy())
+    ed.redo()
+    assert s.source.decoded.colors[rows, 1].mean() > 0.9

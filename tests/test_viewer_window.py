@@ -157,7 +157,9 @@ def test_paint_stroke_undo_save_in_the_window(avatar_window):
     ed.set_color("#000000")
     ed.brush.radius = 8
     drag(win, glfw.MOUSE_BUTTON_LEFT, (70, 40), (90, 50), steps=4)  # one stroke, frames drawn while dragging
-    assert ed.last_stroke.updates >= 2  # the frame updated during the drag
+    assert ed.background and ed.stroke is not None and ed.stroke.dabs >= 2  # preview shown while dragging
+    ed.wait()  # the solves run beside the frame loop
+    assert ed.last_stroke.updates >= 1
     assert len(state.source.avatar.history) == 1
     assert win._shown_title.endswith("avatar.gma*")  # dirty marker
     shot = assert_window_equals_offscreen(win)
@@ -194,6 +196,7 @@ def test_dropped_image_is_a_stamp_preview_applied_with_enter(avatar_window, tmp_
     shot = assert_window_equals_offscreen(win)  # the preview quad, on screen as offscreen
     assert shot[50, 80, 1] > before[50, 80, 1] + 30 or before[50, 80, 1] > 200
     key(win, glfw.KEY_ENTER)
+    state.edit.wait()
     assert state.source.avatar.history[-1]["op"] == "stamp"
     key(win, glfw.KEY_N)  # navigate: no preview
     after = win.screenshot()
@@ -207,6 +210,7 @@ def test_closing_with_unsaved_edits_asks_first(avatar_window):
     win = avatar_window
     win.state.edit.select_box((60, 20, 100, 70), (W, H))
     win.state.edit.fill()
+    win.state.edit.wait()
     win._on_close_request(win.window)
     assert not win.should_close and "unsaved" in win.state.message
     win._on_close_request(win.window)  # a second close discards

@@ -8,6 +8,14 @@ through :class:`gma.edit.Editor` (the only place edits happen); a :class:`gma.ed
 the GPU by rewriting its rows only (:meth:`gma.view.source.BodySource.update_rows`): no full re-upload,
 no new pipelines, and the frame loop (animation included) keeps running between and during strokes.
 
+Feature solves take from tens of milliseconds to a second on a loaded 2-core CPU, longer than a frame.
+With ``background`` (the window's setting) an edit runs on a worker thread: its target colours are
+written to the touched rows of the GPU colour buffer at once (a preview, visible on the next frame),
+the frame loop and the animation go on, and :meth:`EditTools.poll` (once per frame) uploads the decoded
+result when the solve is done. One edit runs at a time; every action that reads or writes the avatar
+waits for it first, so the editor is never used from two threads at once. Tests and scripts that call
+the tools directly use the same code with ``background=False`` or call :meth:`EditTools.wait`.
+
 Selections are made in a :class:`gma.edit.ScreenView` of what is on screen now (the posed mesh seen by
 the current camera, with a face-ID render so that only visible faces are hit). The view is cached until
 the camera, the window size or the pose changes, so a brush stroke renders IDs once, not per dab.
@@ -16,6 +24,7 @@ the camera, the window size or the pose changes, so a brush stroke renders IDs o
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -80,8 +89,10 @@ class EditTools:
     """Edit tools on a viewer ``state`` (:class:`viewer.state.ViewerState`) whose source is bound to a
     body. Editing features needs an avatar source (``source.avatar``); selection works on any body."""
 
-    def __init__(self, state):
+    def __init__(self, state, background: bool = False):
         self.state = state
+        self.background = background  # run edits on a worker thread (see the module doc)
+        self._job: dict | None = None
         self.source = state.source
         self.body = self.source.body
         self.selection = Selection(torch.zeros(0, dtype=torch.long), self.body.num_faces)
@@ -103,6 +114,8 @@ class EditTools:
         self._last_dab: tuple[float, float] | None = None
         self._stroke_start = 0
         self._stroke_mode = "paint"
+        self._stroke_size = (1, 1)
+        self._ending = False
         self._view: ScreenView | None = None
         self._view_key = None
         self._ids = None
@@ -172,6 +185,7 @@ class EditTools:
         return self.set_selection(sel, mode)
 
     def select_wand(self, x: float, y: float, size, mode: str = "replace") -> Selection:
+        self.wait()  # the wand reads the decoded colours
         return self.set_selection(self.editor.wand(self.view(size), x, y, self.wand_tolerance), mode)
 
     def select_region(self, name: str, mode: str = "replace") -> Selection:
@@ -250,15 +264,100 @@ class EditTools:
             ctl.expression = ctl.expression_space.default_tensor()
         ctl.apply()
 
-    def _run(self, what: str, fn):
-        """Run one edit, apply it, time it and report it in the status line."""
+    def _run(self, what: str, fn, preview: tuple | None = None, after=None):
+        """Run one edit ``fn`` (returning a Change or a list), apply it, time it and report it in the
+        status line; ``preview`` (selection, colour) is shown at once; ``after`` runs (on this thread)
+        once the change is applied. In the background: returns None at once, see :meth:`poll`."""
+        self._join()
         t0 = time.perf_counter()
-        change = fn()
+        if preview is not None:
+            self._preview(*preview)
+        job = {"what": what, "t0": t0, "after": after, "change": None, "error": None}
+        if not self.background:
+            job["change"] = fn()
+            return self._finish(job)
+
+        def work():
+            try:
+                job["change"] = fn()
+            except Exception as exc:  # handed to the frame loop's poll(), which reports it
+                job["error"] = exc
+
+        job["thread"] = threading.Thread(target=work, name=f"gma-edit-{what}", daemon=True)
+        self._job = job
+        job["thread"].start()
+        self.state.message = f"{what}..."
+        return None
+
+    def _finish(self, job: dict):
+        change = job["change"]
         self.apply(change)
-        self.last_change_ms = (time.perf_counter() - t0) * 1e3
+        self.last_change_ms = (time.perf_counter() - job["t0"]) * 1e3
         n = sum(len(c.faces) for c in change) if isinstance(change, list) else len(change.faces)
-        self.state.message = f"{what}: {n} faces in {self.last_change_ms:.0f} ms"
+        self.state.message = f"{job['what']}: {n} faces in {self.last_change_ms:.0f} ms"
+        if job["after"] is not None:
+            job["after"]()
         return change
+
+    @property
+    def busy(self) -> bool:
+        """An edit is running on the worker thread."""
+        return self._job is not None
+
+    def poll(self):
+        """Apply the background edit if it has finished (call once per frame). Returns its change, or
+        None; a failed edit raises its error here (and its preview is taken back)."""
+        job = self._job
+        if job is None or job["thread"].is_alive():
+            return None
+        self._job = None
+        if job["error"] is not None:
+            self._unpreview()
+            raise job["error"]
+        return self._finish(job)
+
+    def _join(self):
+        """Wait for the running background edit, if any, and apply it."""
+        if self._job is not None:
+            self._job["thread"].join()
+            return self.poll()
+        return None
+
+    def wait(self) -> None:
+        """Wait until every edit asked for has landed (the running one, and the rest of a finished
+        brush stroke)."""
+        while True:
+            if self._job is not None:
+                self._join()
+            elif self.stroke is not None and self._ending:
+                self.stroke_update(self._stroke_size)  # submits the stroke's last dabs, or merges it
+            else:
+                return
+
+    def _preview(self, sel: Selection, color) -> None:
+        """Write the paint target (blended by the selection's weights) into the GPU colour rows of the
+        selected faces now; the solved colours replace it when the edit lands."""
+        if len(sel) == 0 or not self.can_edit:
+            return
+        nk = self.avatar.config.fine_per_face
+        rows = (sel.faces[:, None] * nk + torch.arange(nk)).reshape(-1)
+        w = sel.face_weights().repeat_interleave(nk)[:, None]
+        colors = self.source.decoded.colors
+        col = colors[rows] * (1 - w) + torch.as_tensor(np.asarray(color, np.float32)) * w
+        lo, hi = int(rows.min()), int(rows.max()) + 1
+        if len(rows) < hi - lo and int((torch.diff(rows.sort().values) != 1).sum()) > 256:
+            span = colors[lo:hi].clone()  # scattered rows: one write of the span, not thousands
+            span[rows - lo] = col
+            self.source.write_colors(np.arange(lo, hi), span.numpy())
+        else:
+            self.source.write_colors(rows.numpy(), col.numpy())
+        self._previewed = rows
+
+    def _unpreview(self) -> None:
+        rows = getattr(self, "_previewed", None)
+        if rows is not None:
+            self.source.write_colors(rows.numpy(), self.source.decoded.colors[rows].numpy())
+            self._previewed = None
 
     # -- paint ----------------------------------------------------------------------------------------
     def set_color(self, color) -> tuple[float, float, float]:
@@ -274,8 +373,9 @@ class EditTools:
 
     def fill(self):
         """Paint the whole selection with the current colour (soft weights blend at its edges)."""
-        sel = self.selection
-        return self._run("paint", lambda: self.editor.paint(sel, self.color))
+        sel, color, editor = self.selection, self.color, self.editor
+        sel.require()
+        return self._run("paint", lambda: editor.paint(sel, color), preview=(sel, color))
 
     def pick_color(self, x: float, y: float, size) -> tuple[float, float, float]:
         """Eyedropper: the colour of the rendered frame at pixel (x, y), without the selection overlay.
@@ -296,11 +396,15 @@ class EditTools:
     def stroke_begin(self, x: float, y: float, mode: str = "paint") -> None:
         """Start a brush stroke at (x, y): ``mode`` "paint" paints, "select" adds to the selection,
         "deselect" removes from it. Dabs are applied by :meth:`stroke_update` (once per frame)."""
+        self.wait()
         if mode == "paint":
             self.editor  # noqa: B018 - fail on press, not in the middle of the stroke
         self._stroke_mode = mode
         self._stroke_start = len(self.avatar.history) if self.avatar is not None else 0
         self.stroke = StrokeStats()
+        self._stroke_color = self.color
+        self._stroke_todo: Selection | None = None  # dabs shown as preview, not solved yet
+        self._ending = False  # released: solve what is left, then fold the stroke into one record
         self._pending = [(x, y)]
         self._last_dab = None
 
@@ -333,46 +437,68 @@ class EditTools:
         return out
 
     def stroke_update(self, size) -> bool:
-        """Apply the dabs queued since the last call as one edit (the union of their brush discs, weights
-        by maximum). Called once per frame while dragging; True when something changed."""
+        """Apply the dabs queued since the last call (the union of their brush discs, weights by
+        maximum). Called once per frame while dragging; True when the frame changed. In the background
+        the dabs are shown as a preview at once and solved together when the previous solve is done."""
         if self.stroke is None:
             return False
-        pts = self._dab_points()
-        if not pts:
-            return False
+        self._stroke_size = size
+        if self._stroke_mode == "paint" and self.busy:
+            self.poll()
         t0 = time.perf_counter()
-        view = self.view(size)
+        pts = self._dab_points()
         sel = None
-        for p in pts:
-            disc = Selection.brush(view, p, self.brush.radius, self.brush.falloff)
-            sel = disc if sel is None else sel.union(disc)
-        st = self.stroke
-        st.dabs += len(pts)
-        if self._stroke_mode == "paint":
-            if len(sel) == 0:
-                return False
-            self.apply(self.editor.paint(sel, self.color))
-            st.faces += len(sel)
-        else:
-            self.set_selection(sel, "add" if self._stroke_mode == "select" else "subtract")
-        st.updates += 1
-        st.update_ms.append((time.perf_counter() - t0) * 1e3)
+        if pts:
+            view = self.view(size)
+            for p in pts:
+                disc = Selection.brush(view, p, self.brush.radius, self.brush.falloff)
+                sel = disc if sel is None else sel.union(disc)
+            self.stroke.dabs += len(pts)
+        if self._stroke_mode != "paint":
+            if sel is not None:
+                self.set_selection(sel, "add" if self._stroke_mode == "select" else "subtract")
+            if self._ending:
+                self.last_stroke, self.stroke = self.stroke, None
+            return sel is not None
+        changed = sel is not None and len(sel) > 0
+        if changed:
+            if self.background:  # shown now; solved when the worker is free
+                self._preview(sel, self._stroke_color)
+            todo = self._stroke_todo
+            self._stroke_todo = sel if todo is None else todo.union(sel)
+        if self.busy:
+            return changed
+        if self._stroke_todo is None:
+            if self._ending:
+                self._merge_stroke()
+            return changed
+        todo, self._stroke_todo = self._stroke_todo, None
+        self.stroke.faces += len(todo)
+        self.stroke.updates += 1
+        editor, color = self.editor, self._stroke_color
+        self._run("paint", lambda: editor.paint(todo, color), after=self._merge_stroke if self._ending else None)
+        self.stroke.update_ms.append((time.perf_counter() - t0) * 1e3)
         return True
 
     def stroke_end(self, size) -> None:
-        """Finish the stroke: apply what is queued and fold its dabs into one history record (so one
-        undo takes back the whole stroke)."""
+        """Finish the stroke: solve what is left and fold its dabs into one history record (so one
+        undo takes back the whole stroke); in the background this happens when the solves land (the
+        frame loop's :meth:`stroke_update` calls, or :meth:`wait`)."""
         if self.stroke is None:
             return
+        self._ending = True
         self.stroke_update(size)
+
+    def _merge_stroke(self) -> None:
+        if self.stroke is None:
+            return
         st, self.stroke = self.stroke, None
         self.last_stroke = st
-        if self._stroke_mode == "paint":
-            n = merge_records(self.avatar.history, self._stroke_start,
-                              {"color": [round(c, 6) for c in self.color], "soft": True, "stroke": st.dabs})
-            if n:
-                ms = np.median(st.update_ms) if st.update_ms else 0.0
-                self.state.message = f"paint stroke: {st.dabs} dabs, {n} faces, {ms:.0f} ms per update"
+        n = merge_records(self.avatar.history, self._stroke_start,
+                          {"color": [round(c, 6) for c in self._stroke_color], "soft": True, "stroke": st.dabs})
+        if n:
+            ms = np.median(st.update_ms) if st.update_ms else 0.0
+            self.state.message = f"paint stroke: {st.dabs} dabs, {n} faces, {ms:.0f} ms per update"
 
     # -- stamp ----------------------------------------------------------------------------------------
     def load_stamp(self, path) -> StampState:
@@ -420,8 +546,8 @@ class EditTools:
         w, h = size
         place = StampPlacement(st.centre or (w / 2, h / 2), st.size, "px", st.rotation)
         sel = self.selection if self.stamp_in_selection else None
-        view = self.view(size)
-        return self._run("stamp", lambda: self.editor.stamp(st.image, view, place, sel, st.name))
+        view, editor = self.view(size), self.editor
+        return self._run("stamp", lambda: editor.stamp(st.image, view, place, sel, st.name))
 
     # -- transfer -------------------------------------------------------------------------------------
     def load_donor(self, path):
@@ -430,6 +556,7 @@ class EditTools:
         from gma.edit import check_shared_decoders
 
         path = Path(path)
+        self.wait()
         try:
             donor = Avatar.load(path, self.body)
         except FileNotFoundError as exc:
@@ -458,21 +585,22 @@ class EditTools:
         """Copy the donor's features (``transfer_what``: geo, tex, both) onto the selected faces."""
         if self.donor is None:
             raise InputError("no donor avatar: open one in the Transfer section (or drop a .gma on the window)")
-        sel, what = self.selection, self.transfer_what
+        sel, what, editor, donor = self.selection.require(), self.transfer_what, self.editor, self.donor
         name = self.path.name if self.path else "target"
-        return self._run(f"transfer {what}", lambda: self.editor.transfer(self.donor, sel, what,
-                                                                          donor_name=self.donor_name,
-                                                                          target_name=name))
+        return self._run(f"transfer {what}", lambda: editor.transfer(donor, sel, what, donor_name=self.donor_name,
+                                                                     target_name=name))
 
     # -- body -----------------------------------------------------------------------------------------
     def keep_body(self):
         """Write the Body panel's shape and expression into the avatar (undoable, saved with it)."""
-        ctl = self.state.controls
-        return self._run("body", lambda: self.editor.set_body(shape=ctl.shape, expression=ctl.expression))
+        self.wait()
+        ctl, editor = self.state.controls, self.editor
+        shape, expr = ctl.shape.clone(), ctl.expression.clone()
+        return self._run("body", lambda: editor.set_body(shape=shape, expression=expr))
 
     # -- history --------------------------------------------------------------------------------------
     def history(self) -> list[str]:
-        """One line per history record, oldest first."""
+        """One line per history record, oldest first (as of the last applied edit)."""
         return [summarize(r) for r in self.avatar.history] if self.avatar is not None else []
 
     @property
@@ -483,21 +611,29 @@ class EditTools:
     def can_redo(self) -> bool:
         return self._editor is not None and self._editor.can_redo
 
+    # Undo / redo restore stored rows (no solve: milliseconds), so they run on this thread.
     def undo(self):
-        return self._run("undo", self.editor.undo)
+        self.wait()
+        return self._now("undo", self.editor.undo)
 
     def redo(self):
-        return self._run("redo", self.editor.redo)
+        self.wait()
+        return self._now("redo", self.editor.redo)
 
     def revert(self, index: int):
         """Undo back to the first ``index`` records (0: the avatar as fitted or first saved)."""
-        return self._run(f"revert to {index}", lambda: self.editor.revert(index))
+        self.wait()
+        return self._now(f"revert to {index}", lambda: self.editor.revert(index))
+
+    def _now(self, what: str, fn):
+        return self._finish({"what": what, "t0": time.perf_counter(), "after": None, "change": fn()})
 
     # -- file -----------------------------------------------------------------------------------------
     def save(self, path=None) -> Path:
         """Write the avatar (with its history) atomically to ``path`` (default: the file it came from)."""
         if self.avatar is None:
             raise InputError("nothing to save: this source is not an avatar")
+        self.wait()
         target = Path(path) if path else self.path
         if target is None:
             raise InputError("save as: give a file name")

@@ -70,6 +70,8 @@ class ViewerWindow:
                 print(f"viewer: panels disabled ({exc}); install imgui-bundle for them")
             else:
                 self.ui = Panels(self, self.format)
+        if state.edit is not None:
+            state.edit.background = True  # solves run beside the frame loop (see viewer.editing)
         self._drag: dict | None = None
         self._mods = 0
         self._cursor = (0.0, 0.0)  # last cursor position in window coordinates (from the callback)
@@ -309,8 +311,10 @@ class ViewerWindow:
         else:
             self.state.tick(dt)
         w, h = self.size
-        if self.edit is not None and self.edit.stroke is not None:
-            report(self.state, self.edit.stroke_update, (w, h))  # the dabs queued since the last frame
+        if self.edit is not None:
+            report(self.state, self.edit.poll)  # a background edit that finished: upload its rows
+            if self.edit.stroke is not None:
+                report(self.state, self.edit.stroke_update, (w, h))  # the dabs queued since the last frame
         if (w, h) != self._configured_size:
             self.context.set_physical_size(w, h)
             self.context.configure(device=self.ctx.device, format=self.format,

@@ -223,6 +223,19 @@ class BodySource:
         self.pose_version += 1
         return written
 
+    def write_colors(self, rows, colors) -> None:
+        """Overwrite the colours of surfel ``rows`` [R] with ``colors`` [R, 3] on the GPU only (an edit's
+        preview; :meth:`update_rows` writes the decoded result later). One write per contiguous run."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        colors = np.asarray(colors, np.float32).reshape(-1, 3)
+        if not len(rows):
+            return
+        order = np.argsort(rows, kind="stable")
+        rows, colors = rows[order], colors[order]
+        breaks = np.nonzero(np.diff(rows) != 1)[0] + 1
+        for seg_rows, seg_cols in zip(np.split(rows, breaks), np.split(colors, breaks)):
+            self.ctx.write(self.surfels.colors, np.ascontiguousarray(seg_cols), int(seg_rows[0]) * 12)
+
     def _rest_vertices(self, params: dict) -> torch.Tensor:
         shape, expr = params["shape"], params["expression"]
         if self._expr_basis is not None:
