@@ -229,3 +229,27 @@ def test_background_edit_shows_a_preview_then_the_solved_rows(avatar_state):
     np.testing.assert_array_equal(gpu_colors(s), s.source.decoded.colors.numpy())
     ed.redo()
     assert s.source.decoded.colors[rows, 1].mean() > 0.9
+
+
+@pytest.mark.slow
+def test_edits_keep_buffers_and_pipelines_and_animation_plays(avatar_state):
+    s, ed = avatar_state, avatar_state.edit
+    s.play_motion("walk")
+    ed.select_box((50, 20, 110, 80), SIZE)  # in the pose shown now
+    s.renderer.render_image(s.scene, s.camera(W, H))  # builds the highlight overlay's pipelines
+    bufs = (s.source.poser.surfels_buf, s.source.surfels.colors, s.source.surfels.means)
+    pipelines = dict(s.renderer.pipelines._cache)
+    frame0 = s.controls.frame
+    s.tick(0.2)
+    assert s.controls.frame != frame0  # playing
+    ed.background = True
+    ed.fill()
+    while ed.busy:  # the frame loop goes on while the solve runs
+        s.tick(0.05)
+        s.renderer.render_image(s.scene, s.camera(W, H))
+        ed.poll()
+    ed.wait()
+    assert len(s.source.avatar.history) == 1
+    assert (s.source.poser.surfels_buf, s.source.surfels.colors, s.source.surfels.means) == bufs
+    assert dict(s.renderer.pipelines._cache) == pipelines
+    np.testing.assert_array_equal(gpu_colors(s), s.source.decoded.colors.numpy())

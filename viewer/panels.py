@@ -112,7 +112,7 @@ class Panels:
             self._body_panel()
         if imgui.collapsing_header("Record"):
             self._record_panel()
-        if self.state.edit is not None and imgui.collapsing_header("Edit", imgui.TreeNodeFlags_.default_open):
+        if self.state.edit is not None and imgui.collapsing_header("Edit"):
             self._edit_panel()
         if self.state.message:
             imgui.text_wrapped(self.state.message)
