@@ -443,8 +443,9 @@ class EditTools:
         if self.stroke is None:
             return False
         self._stroke_size = size
-        if self._stroke_mode == "paint" and self.busy:
-            self.poll()
+        if self._stroke_mode == "paint" and self.busy and self.poll() is not None and self._stroke_todo is not None:
+            # the landed solve rewrote rows that newer, unsolved dabs also cover: show those again
+            self._preview(self._stroke_todo, self._stroke_color)
         t0 = time.perf_counter()
         pts = self._dab_points()
         sel = None
@@ -645,7 +646,7 @@ class EditTools:
             self.avatar.save(target)
         except OSError as exc:
             raise InputError(f"cannot write {target}: {exc.strerror or exc}") from None
-        self.source.path = target
+        self.source.path, self.source.name = target, target.name
         self.saved_version = self.version
         self.state.message = f"saved {target} ({len(self.avatar.history)} history records)"
         return target
