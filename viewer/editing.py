@@ -284,8 +284,8 @@ class EditTools:
                 job["error"] = exc
 
         job["thread"] = threading.Thread(target=work, name=f"gma-edit-{what}", daemon=True)
+        job["started"] = False  # started by start() once the preview frame is submitted (or by poll)
         self._job = job
-        job["thread"].start()
         self.state.message = f"{what}..."
         return None
 
@@ -304,11 +304,21 @@ class EditTools:
         """An edit is running on the worker thread."""
         return self._job is not None
 
-    def poll(self):
+    def start(self) -> None:
+        """Start the queued background solve. The window calls this after presenting a frame, so the
+        frame showing an edit's preview is drawn before the solve competes with it for the CPU."""
+        job = self._job
+        if job is not None and not job["started"]:
+            job["started"] = True
+            job["thread"].start()
+
+    def poll(self, start: bool = True):
         """Apply the background edit if it has finished (call once per frame). Returns its change, or
         None; a failed edit raises its error here (and its preview is taken back)."""
         job = self._job
-        if job is None or job["thread"].is_alive():
+        if job is not None and start:
+            self.start()
+        if job is None or not job["started"] or job["thread"].is_alive():
             return None
         self._job = None
         if job["error"] is not None:
@@ -319,6 +329,7 @@ class EditTools:
     def _join(self):
         """Wait for the running background edit, if any, and apply it."""
         if self._job is not None:
+            self.start()
             self._job["thread"].join()
             return self.poll()
         return None
@@ -443,7 +454,8 @@ class EditTools:
         if self.stroke is None:
             return False
         self._stroke_size = size
-        if self._stroke_mode == "paint" and self.busy and self.poll() is not None and self._stroke_todo is not None:
+        landed = self._stroke_mode == "paint" and self.busy and self.poll(start=False) is not None
+        if landed and self._stroke_todo is not None:
             # the landed solve rewrote rows that newer, unsolved dabs also cover: show those again
             self._preview(self._stroke_todo, self._stroke_color)
         t0 = time.perf_counter()

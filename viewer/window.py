@@ -312,7 +312,7 @@ class ViewerWindow:
             self.state.tick(dt)
         w, h = self.size
         if self.edit is not None:
-            report(self.state, self.edit.poll)  # a background edit that finished: upload its rows
+            report(self.state, self.edit.poll, False)  # a background edit that finished: upload its rows
             if self.edit.stroke is not None:
                 report(self.state, self.edit.stroke_update, (w, h))  # the dabs queued since the last frame
         if (w, h) != self._configured_size:
@@ -335,6 +335,8 @@ class ViewerWindow:
         self.context.present()
         self.stats.end_frame()
         self.update_title(self._stats_text)  # sets the title only when it changes (the dirty marker)
+        if self.edit is not None:
+            self.edit.start()  # a solve queued this frame starts now that its preview is on screen
 
     def screenshot(self) -> np.ndarray:
         """Draw a frame and return what was presented: [H, W, 4] uint8 RGBA."""
