@@ -10,8 +10,9 @@ no new pipelines, and the frame loop (animation included) keeps running between 
 
 Feature solves take from tens of milliseconds to a second on a loaded 2-core CPU, longer than a frame.
 With ``background`` (the window's setting) an edit runs on a worker thread: its target colours are
-written to the touched rows of the GPU colour buffer at once (a preview, visible on the next frame),
-the frame loop and the animation go on, and :meth:`EditTools.poll` (once per frame) uploads the decoded
+written to the touched rows of the GPU colour buffer at once (a preview, visible on the next frame; the
+window starts the solve only after presenting that frame, so the two do not share the CPU), the frame
+loop and the animation go on, and :meth:`EditTools.poll` (once per frame) uploads the decoded
 result when the solve is done. One edit runs at a time; every action that reads or writes the avatar
 waits for it first, so the editor is never used from two threads at once. Tests and scripts that call
 the tools directly use the same code with ``background=False`` or call :meth:`EditTools.wait`.
