@@ -89,10 +89,10 @@ def main() -> None:
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display()
     try:
+        from gma.core.args import parse_image_size as parse_size
         from gma.gpu import get_context
         from gma.view import BodySource
         from gma.view.timing import FrameStats
-        from viewer.app import parse_size
         from viewer.state import ViewerState
         from viewer.window import ViewerWindow
 
