@@ -137,6 +137,8 @@ class EditTools:
         if self._editor is None:
             if self.avatar is None:
                 raise InputError("editing needs a fitted avatar (.gma); this source only shows a body")
+            if self.avatar.render_layer != "fine":  # the source holds one coarse surfel per face
+                raise InputError("this avatar shows its coarse layer (mesh_only); the edit tools need fine surfels")
             self._editor = Editor(self.avatar, self.body, self.state.ctx, decoded=self.source.decoded)
         return self._editor
 
