@@ -48,13 +48,14 @@ def main() -> None:
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display()
     try:
-        run(args)
+        with tempfile.TemporaryDirectory(prefix="gma-bench-edit-") as tmp:
+            run(args, Path(tmp))
     finally:
         if xvfb is not None:
             xvfb.terminate()
 
 
-def run(args) -> None:
+def run(args, tmp: Path) -> None:
     import glfw
     import numpy as np
     import torch
@@ -73,7 +74,6 @@ def run(args) -> None:
     w, h = parse_image_size(args.size)
     ctx = get_context()
     body = load_body("anny")
-    tmp = Path(tempfile.mkdtemp(prefix="gma-bench-edit-"))
     path = tmp / "avatar.gma"
     Avatar.create(AvatarConfig(feature_dim=args.feature_dim, fine_per_face=args.fine_per_face), body).save(path)
     state = ViewerState(ctx, avatar_source(ctx, path))

@@ -89,13 +89,14 @@ def main() -> None:
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display()
     try:
-        record(args)
+        with tempfile.TemporaryDirectory(prefix="gma-edit-demo-") as tmp:
+            record(args, Path(tmp))
     finally:
         if xvfb is not None:
             xvfb.terminate()
 
 
-def record(args) -> None:
+def record(args, tmp: Path) -> None:
     import glfw
     import imageio.v3 as iio
     import numpy as np
@@ -108,7 +109,6 @@ def record(args) -> None:
     from viewer.window import ViewerWindow
 
     torch.set_num_threads(1)
-    tmp = Path(tempfile.mkdtemp(prefix="gma-edit-demo-"))
     avatar, donor, stamp = make_avatars(tmp, args.fine_per_face)
     ctx = get_context()
     state = ViewerState(ctx, avatar_source(ctx, avatar))
