@@ -29,6 +29,8 @@ SMOKE: dict[str, list[str] | str] = {
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
     "interop.py": ["--size", "32"],
     "edit.py": ["--repeats", "1"],
+    "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
+                       "--repeats", "1", "--stroke-frames", "3"],
     "edit_pictures.py": ["--out", "{tmp}", "--size", "64"],
     "batch_scaling.py": ["--people", "1", "--size", "32", "--steps", "1", "1", "--out", "{tmp}/out"],
     "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",

@@ -45,3 +45,27 @@ def small_body_source(gpu, anny_body):
     from gma.view import BodySource
 
     return BodySource.placeholder(gpu, anny_body, 3000)
+
+
+@pytest.fixture(scope="session")
+def small_avatar_file(anny_body, tmp_path_factory):
+    """A small unfitted avatar (.gma: feature_dim 8, one surfel per face) for the edit tools."""
+    from gma.avatar import Avatar
+    from gma.avatar.config import AvatarConfig
+
+    path = tmp_path_factory.mktemp("avatar") / "small.gma"
+    Avatar.create(AvatarConfig(feature_dim=8, fine_per_face=1), anny_body).save(path)
+    return path
+
+
+@pytest.fixture()
+def avatar_state(gpu, anny_body, small_avatar_file, tmp_path):
+    """A ViewerState on a fresh copy of the small avatar (edits do not leak between tests)."""
+    import shutil
+
+    from gma.view.source import avatar_source
+    from viewer.state import ViewerState
+
+    path = tmp_path / "avatar.gma"
+    shutil.copyfile(small_avatar_file, path)
+    return ViewerState(gpu, avatar_source(gpu, path))

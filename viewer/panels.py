@@ -12,6 +12,8 @@ from wgpu.utils.imgui.imgui_backend import ImguiWgpuBackend
 
 from gma.body.motions import MOTIONS
 from gma.core.errors import GmaError
+from viewer.editing import report
+from viewer.window import TOOLS
 
 __all__ = ["Panels"]
 
@@ -19,7 +21,6 @@ _KEYS = {glfw.KEY_BACKSPACE: imgui.Key.backspace, glfw.KEY_DELETE: imgui.Key.del
          glfw.KEY_LEFT: imgui.Key.left_arrow, glfw.KEY_RIGHT: imgui.Key.right_arrow, glfw.KEY_HOME: imgui.Key.home,
          glfw.KEY_END: imgui.Key.end, glfw.KEY_TAB: imgui.Key.tab, glfw.KEY_ESCAPE: imgui.Key.escape,
          glfw.KEY_UP: imgui.Key.up_arrow, glfw.KEY_DOWN: imgui.Key.down_arrow}
-_TOOLS = ("navigate", "box", "lasso")
 
 
 class Panels:
@@ -34,6 +35,10 @@ class Panels:
         self.io = self.backend.io
         self.selection_path = "selection.json"
         self.motion_path = ""
+        self.stamp_path = ""
+        self.donor_path = ""
+        self.save_as_path = ""
+        self._hex: str | None = None  # the hex field's text while it is being typed
         self._motion_index = 0
 
     # -- input from glfw --------------------------------------------------------------------------------
@@ -73,6 +78,7 @@ class Panels:
         try:
             self._stats()
             self._main_panel()
+            self._confirm_close()
         finally:
             imgui.render()
         enc = self.window.ctx.device.create_command_encoder(label="viewer.imgui")
@@ -106,7 +112,7 @@ class Panels:
             self._body_panel()
         if imgui.collapsing_header("Record"):
             self._record_panel()
-        if self.state.controls is not None and imgui.collapsing_header("Edit"):
+        if self.state.edit is not None and imgui.collapsing_header("Edit"):
             self._edit_panel()
         if self.state.message:
             imgui.text_wrapped(self.state.message)
@@ -173,6 +179,13 @@ class Panels:
                 if changed:
                     ctl.set_expression(i, v)
             imgui.tree_pop()
+        ed = self.state.edit
+        if ed is not None and ed.can_edit:
+            if imgui.button("keep shape and expression"):
+                report(self.state, ed.keep_body)
+            imgui.same_line()
+            if imgui.button("back to the avatar's"):
+                ed.reset_body()
 
     def _record_panel(self) -> None:
         s, rs = self.state, self.state.record
@@ -199,30 +212,126 @@ class Panels:
                                f"{s.recorder.frame}/{s.recorder.num_frames}")
 
     def _edit_panel(self) -> None:
-        s, w = self.state, self.window
-        changed, i = imgui.combo("tool", _TOOLS.index(w.tool), list(_TOOLS))
+        """Select / Paint / Stamp / Transfer / History / File. Each widget calls one EditTools method
+        (errors become the status line, see :func:`viewer.editing.report`)."""
+        s, w, ed = self.state, self.window, self.state.edit
+        changed, i = imgui.combo("tool", TOOLS.index(w.tool), list(TOOLS))
         if changed:
-            w.tool = _TOOLS[i]
-        imgui.text("drag to select; Shift adds, Ctrl subtracts")
-        _, s.front_only = imgui.checkbox("front-facing only", s.front_only)
-        imgui.text(f"{len(s.scene.selection)} faces selected")
-        body = s.source.body
-        for name in list(body.regions) + list(body.face_label_names):
-            if imgui.small_button(name):
-                s.select_part(name, "add" if imgui.get_io().key_shift else "replace")
-            imgui.same_line()
-        imgui.new_line()
-        if imgui.button("clear"):
-            s.clear_selection()
-        imgui.same_line()
-        if imgui.button("invert"):
-            s.invert_selection()
-        _, self.selection_path = imgui.input_text("file", self.selection_path)
-        for label, action in (("save", s.save_selection), ("load", s.load_selection)):
+            w.tool = TOOLS[i]
+        imgui.text(f"{len(ed.selection)} faces selected  (drag: replace, Shift adds, Ctrl subtracts)")
+        _, ed.brush.radius = imgui.slider_float("brush radius (px)", ed.brush.radius, 2.0, 200.0)
+        _, ed.brush.falloff = imgui.slider_float("brush falloff", ed.brush.falloff, 0.0, 1.0)
+        _, ed.wand_tolerance = imgui.slider_float("wand tolerance", ed.wand_tolerance, 0.0, 0.5)
+        if imgui.tree_node("regions"):
+            body = ed.body
+            for k, name in enumerate(list(body.regions) + list(body.face_label_names)):
+                if k % 6:
+                    imgui.same_line()
+                if imgui.small_button(name):
+                    report(s, ed.select_region, name, "add" if imgui.get_io().key_shift else "replace")
+            imgui.tree_pop()
+        for k, (label, action) in enumerate((("grow", ed.grow), ("shrink", ed.shrink), ("invert", ed.invert),
+                                             ("clear", ed.clear))):
+            if k:
+                imgui.same_line()
             if imgui.button(label):
-                try:
-                    action(self.selection_path)
-                except (GmaError, OSError, ValueError) as exc:
-                    s.message = str(exc)
+                report(s, action)
+        _, self.selection_path = imgui.input_text("selection file", self.selection_path)
+        for label, action in (("save##sel", s.save_selection), ("load##sel", s.load_selection)):
+            if imgui.button(label):
+                report(s, action, self.selection_path)
             imgui.same_line()
         imgui.new_line()
+        if not ed.can_edit:
+            imgui.text("(open a fitted .gma to paint, stamp and transfer)")
+            return
+        if imgui.collapsing_header("Paint", imgui.TreeNodeFlags_.default_open):
+            changed, col = imgui.color_edit3("colour", list(ed.color))
+            if changed:
+                ed.set_color(col)
+            changed, text = imgui.input_text("hex", self._hex if self._hex is not None else ed.hex_color,
+                                             imgui.InputTextFlags_.enter_returns_true)
+            self._hex = text if imgui.is_item_active() else None
+            if changed:
+                report(s, ed.set_color, text)
+                self._hex = None
+            if imgui.button("fill selection (F)"):
+                report(s, ed.fill)
+            imgui.same_line()
+            if imgui.button("paint brush (P)"):
+                w.tool = "paint"
+            imgui.same_line()
+            if imgui.button("eyedropper (I)"):
+                w.tool = "eyedropper"
+            if ed.last_stroke.update_ms:
+                ms = sorted(ed.last_stroke.update_ms)[len(ed.last_stroke.update_ms) // 2]
+                imgui.text(f"last stroke: {ed.last_stroke.updates} updates, median {ms:.0f} ms")
+        if imgui.collapsing_header("Stamp"):
+            _, self.stamp_path = imgui.input_text("image file", self.stamp_path)
+            imgui.same_line()
+            if imgui.button("load##stamp") and report(s, ed.load_stamp, self.stamp_path) is not None:
+                w.tool = "stamp"
+            imgui.text("or drop an image on the window; drag moves, Shift+drag rotates, wheel scales")
+            if ed.stamp is not None:
+                st = ed.stamp
+                _, st.size = imgui.slider_float("size (px)", st.size, 4.0, 1024.0)
+                _, st.rotation = imgui.slider_float("rotation", st.rotation, -180.0, 180.0)
+                _, ed.stamp_in_selection = imgui.checkbox("only in the selection", ed.stamp_in_selection)
+                if imgui.button("apply stamp (Enter)"):
+                    report(s, ed.apply_stamp, w.size)
+        if imgui.collapsing_header("Transfer"):
+            _, self.donor_path = imgui.input_text("donor .gma", self.donor_path)
+            imgui.same_line()
+            if imgui.button("open##donor"):
+                report(s, ed.load_donor, self.donor_path)
+            imgui.text(f"donor: {ed.donor_name or '(none; or drop a .gma on the window)'}")
+            for what in ("geo", "tex", "both"):
+                if imgui.radio_button(what, ed.transfer_what == what):
+                    ed.transfer_what = what
+                imgui.same_line()
+            if imgui.button("transfer to selection"):
+                report(s, ed.transfer)
+        if imgui.collapsing_header("History", imgui.TreeNodeFlags_.default_open):
+            if imgui.button("undo (Ctrl+Z)"):
+                report(s, ed.undo)
+            imgui.same_line()
+            if imgui.button("redo (Ctrl+Shift+Z)"):
+                report(s, ed.redo)
+            records = ed.history()
+            imgui.text(f"{len(records)} records; click one to revert to it")
+            if imgui.selectable("0  (as opened / fitted)", len(records) == 0)[0]:
+                report(s, ed.revert, 0)
+            for k, line in enumerate(records[-12:], start=max(len(records) - 12, 0) + 1):
+                if imgui.selectable(f"{k}  {line.strip()}", k == len(records))[0]:
+                    report(s, ed.revert, k)
+        if imgui.collapsing_header("File", imgui.TreeNodeFlags_.default_open):
+            name = str(ed.path) if ed.path else "(none)"
+            imgui.text(f"{name}{' (unsaved edits)' if ed.dirty else ''}")
+            if imgui.button("save (Ctrl+S)"):
+                report(s, ed.save)
+            _, self.save_as_path = imgui.input_text("save as", self.save_as_path)
+            imgui.same_line()
+            if imgui.button("save##as"):
+                report(s, ed.save, self.save_as_path)
+
+    def _confirm_close(self) -> None:
+        """The unsaved-edits question, while the window holds a close request."""
+        if not self.window.confirm_close:
+            return
+        if not imgui.is_popup_open("Unsaved edits"):
+            imgui.open_popup("Unsaved edits")
+        if imgui.begin_popup_modal("Unsaved edits", None, imgui.WindowFlags_.always_auto_resize)[0]:
+            imgui.text("The avatar has unsaved edits.")
+            ed = self.state.edit
+            if imgui.button("save and close") and report(self.state, ed.save) is not None:
+                self.window.discard_and_close()
+                imgui.close_current_popup()
+            imgui.same_line()
+            if imgui.button("discard"):
+                self.window.discard_and_close()
+                imgui.close_current_popup()
+            imgui.same_line()
+            if imgui.button("cancel"):
+                self.window.cancel_close()
+                imgui.close_current_popup()
+            imgui.end_popup()

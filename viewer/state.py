@@ -1,5 +1,6 @@
 """The viewer's state and its action API, independent of the window: everything a panel, a mouse gesture
-or a test can do (orbit, presets, playback, body sliders, selection, recording) is a method here."""
+or a test can do (orbit, presets, playback, body sliders, selection, recording) is a method here; the
+edit tools (selection, paint, stamp, transfer, history, save) are ``state.edit`` (:mod:`viewer.editing`)."""
 
 from __future__ import annotations
 
@@ -9,11 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from gma.core.camera import Camera
+from gma.core.errors import InputError
 from gma.gpu import GpuContext
 from gma.view import CameraPath, FrameRenderer, OrbitCamera, Scene, SurfelSource
 from gma.view.controls import BodyControls, load_motion
 from gma.view.record import Recorder
-from gma.view.selection import faces_in_box, faces_in_lasso, load_selection, save_selection
+from viewer.editing import EditTools
 
 __all__ = ["RecordSettings", "ViewerState"]
 
@@ -43,11 +45,10 @@ class ViewerState:
         self.presets = list(presets or [])
         self.preset: int | None = None  # index into presets while one is active
         self.controls = BodyControls(source) if getattr(source, "body", None) is not None else None
-        self.selection_mode = "box"  # "box" | "lasso" (what a left drag in select mode does)
-        self.front_only = True
         self.record = RecordSettings()
         self.recorder: Recorder | None = None
         self.message = ""
+        self.edit = EditTools(self) if getattr(source, "body", None) is not None else None
 
     # -- camera ---------------------------------------------------------------------------------------
     def camera(self, width: int, height: int) -> Camera:
@@ -91,66 +92,48 @@ class ViewerState:
         if self.controls is not None:
             self.controls.advance(dt)
 
-    # -- selection --------------------------------------------------------------------------------------
-    def _need_mesh(self):
-        if getattr(self.source, "body", None) is None:
-            raise ValueError("selection needs a body mesh; this source is a plain surfel cloud")
-        return self.source.body
-
-    def _combine(self, mask: np.ndarray, mode: str) -> None:
-        current = np.zeros(self.source.body.num_faces, bool)
-        current[self.scene.selection] = True
-        if mode == "add":
-            mask = current | mask
-        elif mode == "subtract":
-            mask = current & ~mask
-        elif mode != "replace":
-            raise ValueError(f"selection mode must be replace, add or subtract, not {mode!r}")
-        self.scene.set_selection(np.nonzero(mask)[0])
+    # -- selection (delegated to the edit tools: only faces visible in the current view are hit) --------
+    def _tools(self):
+        if self.edit is None:
+            raise InputError("selection needs a body mesh; this source is a plain surfel cloud")
+        return self.edit
 
     def select_box(self, box, size: tuple[int, int], mode: str = "replace") -> np.ndarray:
-        """Select faces whose centres fall in the pixel box (x0, y0, x1, y1) of a ``size`` = (w, h) view.
-        Returns the selected face ids."""
-        body = self._need_mesh()
-        mask = faces_in_box(self.source.posed_vertices(), body.faces.numpy(), self.camera(*size), box,
-                            self.front_only)
-        self._combine(mask, mode)
+        """Select the visible faces whose centres fall in the pixel box (x0, y0, x1, y1) of a ``size`` =
+        (w, h) view. Returns the selected face ids."""
+        self._tools().select_box(box, size, mode)
         return self.scene.selection
 
     def select_lasso(self, polygon, size: tuple[int, int], mode: str = "replace") -> np.ndarray:
-        body = self._need_mesh()
-        mask = faces_in_lasso(self.source.posed_vertices(), body.faces.numpy(), self.camera(*size),
-                              np.asarray(polygon, np.float64), self.front_only)
-        self._combine(mask, mode)
+        self._tools().select_lasso(polygon, size, mode)
         return self.scene.selection
 
     def select_part(self, name: str, mode: str = "replace") -> np.ndarray:
         """Select a coarse region (head, arms, ...) or a fine part label of the body."""
-        body = self._need_mesh()
-        self._combine(body.region_mask(name).numpy(), mode)
+        self._tools().select_region(name, mode)
         return self.scene.selection
 
     def clear_selection(self) -> None:
-        self.scene.set_selection(np.zeros(0, np.int64))
+        self._tools().clear()
 
     def invert_selection(self) -> None:
-        body = self._need_mesh()
-        mask = np.ones(body.num_faces, bool)
-        mask[self.scene.selection] = False
-        self.scene.set_selection(np.nonzero(mask)[0])
+        self._tools().invert()
 
     def save_selection(self, path: str | Path) -> None:
-        body = self._need_mesh()
-        save_selection(path, self.scene.selection, body.name, body.num_faces)
-        self.message = f"saved {len(self.scene.selection)} faces to {path}"
+        tools = self._tools()
+        tools.selection.save(path, self.source.body.name)
+        self.message = f"saved {len(tools.selection)} faces to {path}"
 
     def load_selection(self, path: str | Path, mode: str = "replace") -> None:
-        body = self._need_mesh()
-        sel = load_selection(path, body.name, body.num_faces)
-        mask = np.zeros(body.num_faces, bool)
-        mask[sel.faces] = True
-        self._combine(mask, mode)
-        self.message = f"loaded {len(sel.faces)} faces from {path}"
+        from gma.edit import Selection
+
+        body = self._tools().body
+        try:
+            sel = Selection.load(path, body.name, body.num_faces)
+        except FileNotFoundError as exc:
+            raise InputError(str(exc)) from None
+        self.edit.set_selection(sel, mode)
+        self.message = f"loaded {len(sel)} faces from {path}"
 
     # -- recording ---------------------------------------------------------------------------------------
     def add_record_key(self) -> None:

@@ -1,9 +1,18 @@
 """The glfw window: a wgpu surface (``wgpu.gpu.get_canvas_context`` with glfw's present info), mouse and
 keyboard input mapped to :class:`ViewerState` actions, the frame loop, and screenshots of the surface.
 
-Mouse: left drag orbits (navigate tool) or selects (box / lasso tool; Shift adds, Ctrl subtracts);
-right or middle drag pans; wheel zooms. Keys: Space play/pause, R reset view, N/B/L navigate/box/lasso
-tool, W wireframe, Esc clear selection, F1 panels on/off, 1-9 camera presets, 0 orbit camera.
+Every gesture is translated into a call on :class:`ViewerState` or its edit tools
+(:class:`viewer.editing.EditTools`); the window itself holds no tool logic.
+
+Mouse: left drag orbits (navigate), selects (box, lasso, brush; Shift adds, Ctrl subtracts), paints
+(paint: strokes with the brush), picks (wand, eyedropper: click) or moves the stamp (stamp; Shift+drag
+rotates, wheel scales); right or middle drag pans; wheel zooms. Files dropped on the window: images
+become the stamp, .gma files the transfer donor.
+Keys: Space play/pause, R reset view, N navigate, B box, L lasso, C brush select, M magic wand,
+P paint, I eyedropper, T stamp, F fill selection, Enter apply stamp, G / Shift+G grow / shrink,
+[ ] brush radius, Ctrl+I invert, Esc clear selection, Ctrl+Z undo, Ctrl+Shift+Z (or Ctrl+Y) redo,
+Ctrl+S save, W wireframe, F1 panels on/off, 1-9 camera presets, 0 orbit camera. Closing with unsaved
+edits asks first (panels), or needs a second close (no panels).
 """
 
 from __future__ import annotations
@@ -15,12 +24,18 @@ import numpy as np
 import wgpu
 from wgpu.utils.glfw_present_info import get_glfw_present_info
 
-from gma.core.errors import DeviceError, GmaError
+from gma.core.errors import DeviceError
 from gma.view.renderer import read_texture
 from gma.view.timing import FrameStats
+from viewer.editing import report
 from viewer.state import ViewerState
 
-__all__ = ["ViewerWindow"]
+__all__ = ["TOOLS", "ViewerWindow"]
+
+# Tools a left drag / click uses; the keys choosing them.
+TOOLS = ("navigate", "box", "lasso", "brush", "wand", "paint", "eyedropper", "stamp")
+_TOOL_KEYS = {glfw.KEY_N: "navigate", glfw.KEY_B: "box", glfw.KEY_L: "lasso", glfw.KEY_C: "brush",
+              glfw.KEY_M: "wand", glfw.KEY_P: "paint", glfw.KEY_I: "eyedropper", glfw.KEY_T: "stamp"}
 
 
 class ViewerWindow:
@@ -35,6 +50,7 @@ class ViewerWindow:
                               "`gma render` makes videos without one")
         glfw.window_hint(glfw.CLIENT_API, glfw.NO_API)
         glfw.window_hint(glfw.VISIBLE, visible)
+        self.title = title
         self.window = glfw.create_window(int(width), int(height), title, None, None)
         if not self.window:
             raise DeviceError(f"glfw could not create a {width}x{height} window on this display")
@@ -54,6 +70,8 @@ class ViewerWindow:
                 print(f"viewer: panels disabled ({exc}); install imgui-bundle for them")
             else:
                 self.ui = Panels(self, self.format)
+        if state.edit is not None:
+            state.edit.background = True  # solves run beside the frame loop (see viewer.editing)
         self._drag: dict | None = None
         self._mods = 0
         self._cursor = (0.0, 0.0)  # last cursor position in window coordinates (from the callback)
@@ -66,6 +84,13 @@ class ViewerWindow:
         glfw.set_scroll_callback(w, self._on_scroll)
         glfw.set_key_callback(w, self._on_key)
         glfw.set_char_callback(w, self._on_char)
+        glfw.set_drop_callback(w, self._on_drop)
+        glfw.set_window_close_callback(w, self._on_close_request)
+        self.confirm_close = False  # an unsaved-edits question is open (the panels show it)
+        self._close_asked = False
+        self._shown_title = ""
+        self._stats_text = ""
+        self.update_title()
 
     # -- geometry ---------------------------------------------------------------------------------------
     @property
@@ -83,6 +108,13 @@ class ViewerWindow:
     def _ui_wants_mouse(self) -> bool:
         return self.ui is not None and self.ui.visible and self.ui.wants_mouse
 
+    @property
+    def edit(self):
+        return self.state.edit
+
+    def _mode(self, mods: int) -> str:
+        return "add" if mods & glfw.MOD_SHIFT else "subtract" if mods & glfw.MOD_CONTROL else "replace"
+
     def _on_button(self, window, button, action, mods) -> None:
         if self.ui is not None:
             self.ui.on_button(button, action)
@@ -90,25 +122,35 @@ class ViewerWindow:
         x, y = self._to_pixels(*self._cursor)
         if action == glfw.PRESS and not self._ui_wants_mouse():
             kind = "pan" if button in (glfw.MOUSE_BUTTON_RIGHT, glfw.MOUSE_BUTTON_MIDDLE) else "orbit"
-            if button == glfw.MOUSE_BUTTON_LEFT and mods & glfw.MOD_SHIFT and self.tool == "navigate":
-                kind = "pan"
-            if button == glfw.MOUSE_BUTTON_LEFT and self.tool in ("box", "lasso"):
-                kind = self.tool
+            if button == glfw.MOUSE_BUTTON_LEFT:
+                if mods & glfw.MOD_SHIFT and self.tool == "navigate":
+                    kind = "pan"
+                elif self.tool != "navigate" and self.edit is not None:
+                    kind = self.tool
             self._drag = {"kind": kind, "start": (x, y), "last": (x, y), "points": [(x, y)], "mods": mods}
+            if kind in ("brush", "paint"):
+                mode = "paint" if kind == "paint" else "deselect" if mods & glfw.MOD_CONTROL else "select"
+                if kind == "brush" and self._mode(mods) == "replace":
+                    report(self.state, self.edit.clear)
+                if report(self.state, self.edit.stroke_begin, x, y, mode) is None and self.edit.stroke is None:
+                    self._drag = None
         elif action == glfw.RELEASE and self._drag is not None:
             self._finish_drag(x, y)
 
     def _finish_drag(self, x: float, y: float) -> None:
         d, self._drag = self._drag, None
-        mode = "add" if d["mods"] & glfw.MOD_SHIFT else "subtract" if d["mods"] & glfw.MOD_CONTROL else "replace"
-        try:
-            if d["kind"] == "box":
-                x0, y0 = d["start"]
-                self.state.select_box((x0, y0, x, y), self.size, mode)
-            elif d["kind"] == "lasso" and len(d["points"]) >= 3:
-                self.state.select_lasso(d["points"], self.size, mode)
-        except (GmaError, ValueError) as exc:
-            self.state.message = str(exc)
+        mode, kind, ed = self._mode(d["mods"]), d["kind"], self.edit
+        if kind == "box":
+            x0, y0 = d["start"]
+            report(self.state, ed.select_box, (x0, y0, x, y), self.size, mode)
+        elif kind == "lasso" and len(d["points"]) >= 3:
+            report(self.state, ed.select_lasso, d["points"], self.size, mode)
+        elif kind in ("brush", "paint"):
+            report(self.state, ed.stroke_end, self.size)
+        elif kind == "wand":
+            report(self.state, ed.select_wand, x, y, self.size, mode)
+        elif kind == "eyedropper":
+            report(self.state, ed.pick_color, x, y, self.size)
 
     def _on_cursor(self, window, x, y) -> None:
         if self.ui is not None:
@@ -126,12 +168,36 @@ class ViewerWindow:
             self.state.pan_by(dx, dy, self.size[1])
         elif kind == "lasso":
             self._drag["points"].append((px, py))
+        elif kind in ("brush", "paint"):
+            self.edit.stroke_to(px, py)  # applied once per frame, in draw_frame
+        elif kind == "stamp":
+            if self._drag["mods"] & glfw.MOD_SHIFT:
+                report(self.state, self.edit.rotate_stamp, -dx * 0.5)
+            else:
+                report(self.state, self.edit.move_stamp, dx, dy, self.size)
         self._drag["last"] = (px, py)
+
+    def _on_drop(self, window, paths) -> None:
+        """Files dropped on the window: an avatar becomes the transfer donor, an image the stamp."""
+        if self.edit is None:
+            self.state.message = "this source cannot be edited"
+            return
+        for p in paths:
+            if str(p).lower().endswith(".gma"):
+                report(self.state, self.edit.load_donor, p)
+            elif report(self.state, self.edit.load_stamp, p) is not None:
+                self.tool = "stamp"
+                if self.ui is not None:
+                    self.ui.stamp_path = str(p)
 
     def _on_scroll(self, window, dx, dy) -> None:
         if self.ui is not None:
             self.ui.on_scroll(dx, dy)
-        if not self._ui_wants_mouse():
+        if self._ui_wants_mouse():
+            return
+        if self.tool == "stamp" and self.edit is not None and self.edit.stamp is not None:
+            self.edit.scale_stamp(1.1 ** dy)
+        else:
             self.state.zoom_by(dy)
 
     def _on_char(self, window, codepoint) -> None:
@@ -143,19 +209,42 @@ class ViewerWindow:
             self.ui.on_key(key, action, mods)
             if self.ui.visible and self.ui.wants_keyboard:
                 return
+        if action not in (glfw.PRESS, glfw.REPEAT):
+            return
+        s, ed = self.state, self.edit
+        ctrl, shift = bool(mods & glfw.MOD_CONTROL), bool(mods & glfw.MOD_SHIFT)
+        if ctrl and ed is not None:
+            if key == glfw.KEY_Z and shift or key == glfw.KEY_Y:
+                report(s, ed.redo)
+            elif key == glfw.KEY_Z:
+                report(s, ed.undo)
+            elif key == glfw.KEY_S:
+                report(s, ed.save)
+            elif key == glfw.KEY_I:
+                report(s, ed.invert)
+            return
+        if key == glfw.KEY_LEFT_BRACKET and ed is not None:
+            ed.brush.radius = max(2.0, ed.brush.radius / 1.2)
+        elif key == glfw.KEY_RIGHT_BRACKET and ed is not None:
+            ed.brush.radius = min(500.0, ed.brush.radius * 1.2)
         if action != glfw.PRESS:
             return
-        s = self.state
         if key == glfw.KEY_SPACE and s.controls is not None:
             s.controls.playing = not s.controls.playing
         elif key == glfw.KEY_R:
             s.reset_view()
-        elif key in (glfw.KEY_N, glfw.KEY_B, glfw.KEY_L):
-            self.tool = {glfw.KEY_N: "navigate", glfw.KEY_B: "box", glfw.KEY_L: "lasso"}[key]
+        elif key in _TOOL_KEYS and (ed is not None or _TOOL_KEYS[key] == "navigate"):
+            self.tool = _TOOL_KEYS[key]
+        elif key == glfw.KEY_F and ed is not None:
+            report(s, ed.fill)
+        elif key in (glfw.KEY_ENTER, glfw.KEY_KP_ENTER) and ed is not None and self.tool == "stamp":
+            report(s, ed.apply_stamp, self.size)
+        elif key == glfw.KEY_G and ed is not None:
+            report(s, ed.shrink if shift else ed.grow)
         elif key == glfw.KEY_W:
             s.scene.options.wireframe = not s.scene.options.wireframe
-        elif key == glfw.KEY_ESCAPE:
-            s.clear_selection()
+        elif key == glfw.KEY_ESCAPE and ed is not None:
+            report(s, ed.clear)
         elif key == glfw.KEY_F1 and self.ui is not None:
             self.ui.visible = not self.ui.visible
         elif glfw.KEY_1 <= key <= glfw.KEY_9 and key - glfw.KEY_1 < len(s.presets):
@@ -163,7 +252,45 @@ class ViewerWindow:
         elif key == glfw.KEY_0:
             s.use_preset(None)
 
+    # -- closing and the title ------------------------------------------------------------------------
+    @property
+    def dirty(self) -> bool:
+        return self.edit is not None and self.edit.dirty
+
+    def _on_close_request(self, window) -> None:
+        """Closing with unsaved edits: keep the window open and ask (panels), or warn once (no panels)."""
+        if self.dirty and not self._close_asked:
+            glfw.set_window_should_close(window, False)
+            self._close_asked = True
+            self.confirm_close = self.ui is not None
+            self.state.message = "unsaved edits: Ctrl+S saves; close again to discard them"
+
+    def discard_and_close(self) -> None:
+        self._close_asked, self.confirm_close = True, False
+        glfw.set_window_should_close(self.window, True)
+
+    def cancel_close(self) -> None:
+        self._close_asked = self.confirm_close = False
+        self.state.message = ""
+
+    def update_title(self, stats: str = "") -> None:
+        """``GMA viewer - name* - stats``: the star marks unsaved edits."""
+        name = self.state.source.name + ("*" if self.dirty else "")
+        title = f"{self.title} - {name}" + (f" - {stats}" if stats else "")
+        if title != self._shown_title:
+            glfw.set_window_title(self.window, title)
+            self._shown_title = title
+
     # -- frames -----------------------------------------------------------------------------------------
+    def _overlays(self) -> tuple[list[np.ndarray], list]:
+        """Lines and images over the frame: the drag outline and the edit tools' overlays."""
+        lines = self._drag_lines() or []
+        images = []
+        if self.edit is not None:
+            more, images = self.edit.overlays(self.size, self.tool, self._to_pixels(*self._cursor))
+            lines += more
+        return lines, images
+
     def _drag_lines(self) -> list[np.ndarray] | None:
         d = self._drag
         if d is None or d["kind"] not in ("box", "lasso"):
@@ -184,6 +311,10 @@ class ViewerWindow:
         else:
             self.state.tick(dt)
         w, h = self.size
+        if self.edit is not None:
+            report(self.state, self.edit.poll, False)  # a background edit that finished: upload its rows
+            if self.edit.stroke is not None:
+                report(self.state, self.edit.stroke_update, (w, h))  # the dabs queued since the last frame
         if (w, h) != self._configured_size:
             self.context.set_physical_size(w, h)
             self.context.configure(device=self.ctx.device, format=self.format,
@@ -193,8 +324,9 @@ class ViewerWindow:
         texture = self.context.get_current_texture()
         view = texture.create_view()
         timer = self.stats.timer_for_frame()
+        lines, images = self._overlays()
         self.state.renderer.draw(self.state.scene, self.state.camera(w, h), view, self.format,
-                                 lines=self._drag_lines(), timer=timer)
+                                 lines=lines, timer=timer, images=images)
         if self.ui is not None and self.ui.visible:
             self.ui.draw(view, (w, h), dt)
         if self._want_capture:
@@ -202,6 +334,9 @@ class ViewerWindow:
             self._want_capture = False
         self.context.present()
         self.stats.end_frame()
+        self.update_title(self._stats_text)  # sets the title only when it changes (the dirty marker)
+        if self.edit is not None:
+            self.edit.start()  # a solve queued this frame starts now that its preview is on screen
 
     def screenshot(self) -> np.ndarray:
         """Draw a frame and return what was presented: [H, W, 4] uint8 RGBA."""
@@ -219,8 +354,7 @@ class ViewerWindow:
             while not self.should_close:
                 self.draw_frame()
                 if self.stats.frame % 60 == 0:
-                    glfw.set_window_title(self.window, f"GMA viewer - {self.state.source.name} - "
-                                                       f"{self.stats.summary()}")
+                    self._stats_text = self.stats.summary()
         finally:
             self.close()
 

@@ -5,7 +5,7 @@ Nothing touches a GPU at import; every drawing object takes a :class:`gma.gpu.Gp
 """
 
 from gma.view.orbit import CameraPath, OrbitCamera
-from gma.view.renderer import DrawOptions, FrameRenderer, Scene, read_texture
+from gma.view.renderer import DrawOptions, FrameRenderer, Scene, ScreenImage, read_texture
 from gma.view.source import BodySource, MeshLayer, StaticSource, SurfelSource, load_source
 
 __all__ = [
@@ -16,6 +16,7 @@ __all__ = [
     "MeshLayer",
     "OrbitCamera",
     "Scene",
+    "ScreenImage",
     "StaticSource",
     "SurfelSource",
     "load_source",

@@ -48,9 +48,10 @@ class BodyControls:
         body = source.body
         spaces = body.param_spaces
         self.shape_space, self.expression_space = spaces["shape"], spaces["expression"]
-        avatar = getattr(source, "avatar", None)  # an avatar keeps its own identity under motions
-        self.shape = avatar.shape.clone() if avatar is not None else self.shape_space.default_tensor()
-        self.expression = self.expression_space.default_tensor()
+        # Start from the source's own identity (an avatar opens at its fitted shape and expression, not
+        # at the body's default ones).
+        self.shape = source.params["shape"].clone()
+        self.expression = source.params["expression"].clone()
         self.hand_curl = [0.0, 0.0]  # left, right in [0, 1]
         self.motion = None
         self.frame = 0

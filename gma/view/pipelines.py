@@ -1,4 +1,4 @@
-"""Render pipelines of the viewer (blit, mesh overlays, screen lines), built once per target format and
+"""Render pipelines of the viewer (blit, mesh overlays, screen lines, screen images), built once per target format and
 cached, and the OpenCV-camera -> WebGPU clip-space matrix they share."""
 
 from __future__ import annotations
@@ -54,6 +54,12 @@ class ViewerPipelines:
         self.lines_layout = dev.create_bind_group_layout(entries=[
             {"binding": 0, "visibility": vis, "buffer": {"type": wgpu.BufferBindingType.uniform}},
         ])
+        self.image_layout = dev.create_bind_group_layout(entries=[
+            {"binding": 0, "visibility": vis, "buffer": {"type": wgpu.BufferBindingType.uniform}},
+            {"binding": 1, "visibility": wgpu.ShaderStage.FRAGMENT,
+             "texture": {"sample_type": wgpu.TextureSampleType.float}},
+            {"binding": 2, "visibility": wgpu.ShaderStage.FRAGMENT, "sampler": {"type": "filtering"}},
+        ])
 
     def get(self, kind: str, fmt: str) -> wgpu.GPURenderPipeline:
         key = (kind, str(fmt))
@@ -76,6 +82,13 @@ class ViewerPipelines:
             layout, vs, fs = self.lines_layout, "vs_main", "fs_main"
             topology = wgpu.PrimitiveTopology.line_strip
             buffers = [{"array_stride": 8, "attributes": [{"format": "float32x2", "offset": 0, "shader_location": 0}]}]
+        elif kind == "image":
+            module = shaders.module(dev, "viewer/screen_image.wgsl")
+            layout, vs, fs = self.image_layout, "vs_main", "fs_main"
+            target = {"format": fmt, "blend": _ALPHA_BLEND}
+            buffers = [{"array_stride": 16, "attributes": [
+                {"format": "float32x2", "offset": 0, "shader_location": 0},
+                {"format": "float32x2", "offset": 8, "shader_location": 1}]}]
         else:
             module = shaders.module(dev, "viewer/mesh_overlay.wgsl")
             layout, fs = self.overlay_layout, "fs_color"

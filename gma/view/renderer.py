@@ -22,7 +22,7 @@ from gma.render.rasterizer import SurfelRasterizer
 from gma.view.pipelines import DEPTH_FORMAT, ViewerPipelines, clip_matrix
 from gma.view.source import SurfelSource
 
-__all__ = ["DrawOptions", "FrameRenderer", "Scene"]
+__all__ = ["DrawOptions", "FrameRenderer", "Scene", "ScreenImage"]
 
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 OFFSCREEN_FORMAT = wgpu.TextureFormat.rgba8unorm
@@ -60,6 +60,19 @@ class Scene:
         self.selection_version += 1
 
 
+@dataclass
+class ScreenImage:
+    """An RGBA image drawn over the frame as a quad (stamp preview, donor thumbnail). ``image`` [h, w, 4]
+    uint8 or float in [0, 1]; ``corners`` [4, 2] pixels of its top-left, top-right, bottom-right and
+    bottom-left corners; ``key`` names the image's content: the texture is uploaded once per key, so a
+    quad that only moves costs one 64-byte write per frame."""
+
+    image: np.ndarray
+    corners: np.ndarray
+    key: object
+    opacity: float = 1.0
+
+
 def _edges(faces: np.ndarray) -> np.ndarray:
     """Unique undirected edges [E, 2] of a triangle mesh [F, 3]."""
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -90,6 +103,8 @@ class FrameRenderer:
         self._sel_key = None
         self._num_sel = 0
         self._offscreen = None
+        self._images: dict = {}  # slot -> (key, texture, bind group, params buffer, vertex buffer)
+        self._sampler = None
         self.last_state = None
 
     # -- resources ------------------------------------------------------------------------------------
@@ -146,10 +161,11 @@ class FrameRenderer:
 
     # -- drawing ---------------------------------------------------------------------------------------
     def draw(self, scene: Scene, camera: Camera, target: wgpu.GPUTextureView, target_format: str,
-             lines: list[np.ndarray] | None = None, timer=None) -> None:
+             lines: list[np.ndarray] | None = None, timer=None, images: list[ScreenImage] | None = None) -> None:
         """Draw ``scene`` seen by ``camera`` into ``target`` (a texture view of ``camera``'s size and
-        ``target_format``). ``lines``: screen-space polylines [P, 2] in pixels; ``timer``: a
-        :class:`gma.view.timing.FrameTimer` on sampled frames."""
+        ``target_format``). ``lines``: screen-space polylines [P, 2] in pixels; ``images``: quads drawn
+        over everything (:class:`ScreenImage`); ``timer``: a :class:`gma.view.timing.FrameTimer` on
+        sampled frames."""
         ctx, opts, src = self.ctx, scene.options, scene.source
         w, h = camera.width, camera.height
         enc = ctx.device.create_command_encoder(label="viewer.pose")
@@ -184,6 +200,8 @@ class FrameRenderer:
         want_sel = opts.selection and len(scene.selection) > 0
         if mesh is not None and (opts.wireframe or opts.normals or opts.coarse or want_sel):
             self._draw_mesh_overlays(rp, scene, camera, target_format, mesh)
+        for slot, img in enumerate(images or []):
+            self._draw_image(rp, slot, img, w, h, target_format)
         if lines:
             self._draw_lines(rp, lines, w, h, target_format)
         rp.end()
@@ -233,8 +251,43 @@ class FrameRenderer:
             rp.set_vertex_buffer(0, vb)
             rp.draw(len(pts))
 
+    def _draw_image(self, rp, slot: int, img: ScreenImage, w: int, h: int, fmt: str) -> None:
+        dev = self.ctx.device
+        entry = self._images.get(slot)
+        if entry is None or entry[0] != img.key:
+            data = np.asarray(img.image)
+            if data.dtype != np.uint8:
+                data = (np.clip(data, 0, 1) * 255 + 0.5).astype(np.uint8)
+            ih, iw = data.shape[:2]
+            tex = dev.create_texture(size=(iw, ih, 1), format=wgpu.TextureFormat.rgba8unorm,
+                                     usage=wgpu.TextureUsage.TEXTURE_BINDING | wgpu.TextureUsage.COPY_DST,
+                                     label="viewer.screen_image")
+            dev.queue.write_texture({"texture": tex}, np.ascontiguousarray(data),
+                                    {"bytes_per_row": 4 * iw, "rows_per_image": ih}, (iw, ih, 1))
+            if self._sampler is None:
+                self._sampler = dev.create_sampler(mag_filter="linear", min_filter="linear")
+            params = entry[3] if entry else self.ctx.buffer(16, f"viewer.image{slot}", UNIFORM)
+            vbuf = entry[4] if entry else self.ctx.buffer(96, f"viewer.image{slot}.vertices",
+                                                          wgpu.BufferUsage.VERTEX | wgpu.BufferUsage.COPY_DST)
+            bind = dev.create_bind_group(layout=self.pipelines.image_layout, entries=[
+                {"binding": 0, "resource": {"buffer": params, "offset": 0, "size": 16}},
+                {"binding": 1, "resource": tex.create_view()},
+                {"binding": 2, "resource": self._sampler}])
+            entry = self._images[slot] = (img.key, tex, bind, params, vbuf)
+        _, _, bind, params, vbuf = entry
+        c = np.asarray(img.corners, np.float32).reshape(4, 2)
+        uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+        quad = np.concatenate([c, uv], 1)[[0, 1, 2, 0, 2, 3]]
+        self.ctx.write(vbuf, quad.astype(np.float32))
+        self.ctx.write(params, np.array([w, h, img.opacity, 0], np.float32))
+        rp.set_pipeline(self.pipelines.get("image", fmt))
+        rp.set_bind_group(0, bind)
+        rp.set_vertex_buffer(0, vbuf)
+        rp.draw(6)
+
     # -- offscreen -------------------------------------------------------------------------------------
-    def render_image(self, scene: Scene, camera: Camera, complete: bool = True) -> np.ndarray:
+    def render_image(self, scene: Scene, camera: Camera, complete: bool = True, lines=None, images=None
+                     ) -> np.ndarray:
         """Draw offscreen and read the result back: [H, W, 4] uint8 RGBA. With ``complete`` the frame is
         redrawn once if the intersection capacity had to grow (so no surfel is dropped)."""
         w, h = camera.width, camera.height
@@ -245,12 +298,12 @@ class FrameRenderer:
                 usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC, label="viewer.offscreen")
         view = self._offscreen.create_view()
         before = self.rasterizer.isect_capacity_hint
-        self.draw(scene, camera, view, OFFSCREEN_FORMAT)
+        self.draw(scene, camera, view, OFFSCREEN_FORMAT, lines=lines, images=images)
         # draw() itself grows the capacity every few frames (the first included): a raised hint means this
         # frame dropped intersections even when grow_capacity has nothing left to report.
         if complete and scene.options.surfels and (self.rasterizer.grow_capacity(self.last_state)
                                                    or self.rasterizer.isect_capacity_hint != before):
-            self.draw(scene, camera, view, OFFSCREEN_FORMAT)
+            self.draw(scene, camera, view, OFFSCREEN_FORMAT, lines=lines, images=images)
         return read_texture(self.ctx, self._offscreen)
 
 

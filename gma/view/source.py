@@ -138,6 +138,7 @@ class BodySource:
         self._expr_basis = getattr(body, "expression_basis", lambda: None)()
         self._neutral_rest: tuple[bytes, torch.Tensor] | None = None
         self._rest: torch.Tensor | None = None
+        self.pose_version = 0  # bumped whenever the posed mesh may have changed (edit tools cache views on it)
         self.set_params(self.params)
 
     @staticmethod
@@ -163,6 +164,7 @@ class BodySource:
             self.poser.set_bone_transforms(self._transforms)
         self.params = params
         self._dirty = True
+        self.pose_version += 1
 
     def set_expression(self, expression) -> None:
         """Fast path for playback: new expression weights, pose and shape unchanged (facial actions move
@@ -176,6 +178,7 @@ class BodySource:
             self.poser.set_rest_vertices(self._rest)
             self._rest_key = key
             self._dirty = True
+            self.pose_version += 1
         self.params = params
 
     def set_bone_transforms(self, transforms) -> None:
@@ -183,6 +186,55 @@ class BodySource:
         self._transforms = torch.as_tensor(transforms, dtype=torch.float32)
         self.poser.set_bone_transforms(self._transforms)
         self._dirty = True
+        self.pose_version += 1
+
+    def update_rows(self, rows, colors=None, mesh: bool = False, max_runs: int = 256, gap: int = 16) -> int:
+        """Rewrite the surfel rows [R] an edit changed, from ``self.binding`` (edited in place by the edit
+        library) and ``colors`` [N, 3] (the full colour table, read at ``rows`` only). Only the touched rows
+        travel: one write per run of rows (runs less than ``gap`` rows apart are merged: a few untouched
+        rows cost less than another queue write; the span from the first to the last row when more than
+        ``max_runs`` runs remain). With ``mesh`` the rest vertices (which include
+        ``vertex_offsets``, edited in place too) are recomputed and uploaded. Pipelines and buffers are kept;
+        the next frame re-poses. Returns the bytes written."""
+        from gma.body.placement import pack_surfel_local
+
+        rows = np.unique(np.asarray(rows, np.int64).reshape(-1))
+        written = 0
+        if len(rows):
+            breaks = np.nonzero(np.diff(rows) > gap)[0] + 1
+            starts, ends = np.r_[rows[0], rows[breaks]], np.r_[rows[breaks - 1], rows[-1]] + 1
+            if len(starts) > max_runs:
+                starts, ends = starts[:1], ends[-1:]
+            b = self.binding
+            for lo, hi in zip(starts.tolist(), ends.tolist()):
+                span = SurfelBinding(b.face_id[lo:hi], b.uv[lo:hi], b.offset[lo:hi], b.scale[lo:hi], b.quat[lo:hi])
+                packed = pack_surfel_local(span)
+                self.ctx.write(self.poser.surfels_buf, packed, lo * packed.dtype.itemsize)
+                written += packed.nbytes
+                if colors is not None:
+                    col = np.ascontiguousarray(np.asarray(colors[lo:hi], np.float32))
+                    self.ctx.write(self.surfels.colors, col, lo * 12)
+                    written += col.nbytes
+        if mesh:
+            self._rest_key = None  # vertex_offsets changed: recompute the rest vertices on the next set
+            self.set_params({})
+            written += self._rest.numel() * 4
+        self._dirty = True
+        self.pose_version += 1
+        return written
+
+    def write_colors(self, rows, colors) -> None:
+        """Overwrite the colours of surfel ``rows`` [R] with ``colors`` [R, 3] on the GPU only (an edit's
+        preview; :meth:`update_rows` writes the decoded result later). One write per contiguous run."""
+        rows = np.asarray(rows, np.int64).reshape(-1)
+        colors = np.asarray(colors, np.float32).reshape(-1, 3)
+        if not len(rows):
+            return
+        order = np.argsort(rows, kind="stable")
+        rows, colors = rows[order], colors[order]
+        breaks = np.nonzero(np.diff(rows) != 1)[0] + 1
+        for seg_rows, seg_cols in zip(np.split(rows, breaks), np.split(colors, breaks)):
+            self.ctx.write(self.surfels.colors, np.ascontiguousarray(seg_cols), int(seg_rows[0]) * 12)
 
     def _rest_vertices(self, params: dict) -> torch.Tensor:
         shape, expr = params["shape"], params["expression"]
@@ -249,5 +301,7 @@ def avatar_source(ctx: GpuContext, path) -> BodySource:
     src = BodySource(ctx, body, dec.binding, dec.colors.numpy(), dec.opacities.numpy(), name=Path(path).name,
                      vertex_offsets=dec.vertex_offsets)
     src.set_params({"shape": avatar.shape})
-    src.avatar, src.decoded = avatar, dec
+    if "expression" in avatar.info:  # the avatar's own default expression (written by the edit tools)
+        src.set_params({"expression": torch.tensor(avatar.info["expression"], dtype=torch.float32)})
+    src.avatar, src.decoded, src.path = avatar, dec, Path(path)
     return src

@@ -1,0 +1,208 @@
+"""Scripted screen recording of the viewer's edit tools: a paint stroke, a stamp and a transfer, driven
+through the window's own mouse and keyboard callbacks (the code paths a person's input takes), captured
+from the window's surface and written as a GIF.
+
+    python scripts/record_edit_demo.py docs/viewer_edit.gif      # starts Xvfb when there is no DISPLAY
+
+The avatar is made here (no fitted avatar is needed): a fresh one whose regions are painted with
+gma.edit (skin, shirt, trousers, shoes) so that it reads as a person; the donor is a copy of it with
+another shirt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def ensure_display() -> subprocess.Popen | None:
+    if os.environ.get("DISPLAY"):
+        return None
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        sys.exit("no DISPLAY and no Xvfb: cannot open a window")
+    for num in range(181, 199):
+        if not os.path.exists(f"/tmp/.X{num}-lock"):
+            break
+    proc = subprocess.Popen([exe, f":{num}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(1.0)
+    os.environ["DISPLAY"] = f":{num}"
+    return proc
+
+
+def make_avatars(folder: Path, fine_per_face: int):
+    """(avatar.gma, donor.gma, stamp.png) in ``folder``."""
+    import imageio.v3 as iio
+    import numpy as np
+    import torch
+
+    from gma.avatar import Avatar
+    from gma.avatar.config import AvatarConfig
+    from gma.body import load_body
+    from gma.edit import Editor, Selection, solid_shape
+
+    body = load_body("anny")
+    av = Avatar.create(AvatarConfig(feature_dim=16, fine_per_face=fine_per_face), body)
+    ed = Editor(av, body)
+    regions = Selection.from_regions
+    ed.paint(regions(body, "head", "arms", "hands"), "#d9a98c")
+    ed.paint(regions(body, "torso"), "#3a5f9f")
+    ed.paint(regions(body, "legs"), "#3b3b46")
+    ed.paint(regions(body, "feet"), "#20201e")
+    av.history.clear()  # the demo starts from this look
+    av.save(folder / "avatar.gma")
+    donor = Avatar.load(folder / "avatar.gma", body)
+    ded = Editor(donor, body)
+    torso = regions(body, "torso")
+    ded.paint(torso, "#e8c53a")
+    # Horizontal stripes on the donor's shirt (by face-centre height), so the transfer is easy to see.
+    with torch.no_grad():
+        verts = body.rest_vertices(body.canonical_params(donor.shape))
+    up = {"y": 1, "z": 2}[body.up_axis]
+    centre = verts[body.faces].mean(1)[:, up]
+    ids = torso.faces[((centre[torso.faces] * 25).floor() % 2 == 0)]
+    ded.paint(Selection.from_ids(ids, body.num_faces), "#b8322a")
+    donor.history.clear()
+    donor.save(folder / "donor.gma")
+    star = solid_shape("ring", (1.0, 0.85, 0.1), 96)
+    star[..., :3] = np.where(star[..., 3:] > 0, star[..., :3], 0)
+    iio.imwrite(folder / "stamp.png", (star * 255).astype(np.uint8))
+    return folder / "avatar.gma", folder / "donor.gma", folder / "stamp.png"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("out", nargs="?", default="docs/viewer_edit.gif")
+    ap.add_argument("--size", type=int, default=360, help="square window size in pixels")
+    ap.add_argument("--fine-per-face", type=int, default=2)
+    ap.add_argument("--fps", type=float, default=8.0)
+    args = ap.parse_args()
+    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
+    xvfb = ensure_display()
+    try:
+        with tempfile.TemporaryDirectory(prefix="gma-edit-demo-") as tmp:
+            record(args, Path(tmp))
+    finally:
+        if xvfb is not None:
+            xvfb.terminate()
+
+
+def record(args, tmp: Path) -> None:
+    import glfw
+    import imageio.v3 as iio
+    import numpy as np
+    import torch
+
+    from gma.edit import Selection
+    from gma.gpu import get_context
+    from gma.view.source import avatar_source
+    from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
+
+    torch.set_num_threads(1)
+    avatar, donor, stamp = make_avatars(tmp, args.fine_per_face)
+    ctx = get_context()
+    state = ViewerState(ctx, avatar_source(ctx, avatar))
+    state.orbit.zoom(4.0)  # closer: the upper body fills the frame
+    n = args.size
+    win = ViewerWindow(state, n, n, panels=False)
+    ed = state.edit
+    frames: list[np.ndarray] = []
+
+    def shot(count: int = 1) -> None:
+        for _ in range(count):
+            frames.append(win.screenshot()[..., :3].copy())
+
+    def cursor(x, y):
+        win._on_cursor(win.window, x, y)
+
+    def press(button=glfw.MOUSE_BUTTON_LEFT, mods=0):
+        win._on_button(win.window, button, glfw.PRESS, mods)
+
+    def release(button=glfw.MOUSE_BUTTON_LEFT, mods=0):
+        win._on_button(win.window, button, glfw.RELEASE, mods)
+
+    def key(k, mods=0):
+        win._on_key(win.window, k, 0, glfw.PRESS, mods)
+        win._on_key(win.window, k, 0, glfw.RELEASE, mods)
+
+    def settle():
+        ed.wait()
+        shot(3)
+
+    view = ed.view(win.size)
+    torso = Selection.from_regions(state.source.body, "torso").mask().numpy()
+    vis = np.nonzero(view.visible & torso)[0]
+    cx, cy = np.median(view.px[vis], 0)
+    top, bottom = np.percentile(view.px[vis][:, 1], [15, 85])
+    half = np.percentile(np.abs(view.px[vis][:, 0] - cx), 70)
+    shot(4)
+
+    # 1. paint stroke: red brush zig-zag across the shirt (P: paint tool)
+    key(glfw.KEY_P)
+    ed.set_color("#d23c3c")
+    ed.brush.radius = n / 28
+    path = [(cx - half + 2 * half * (k % 2), top + (bottom - top) * 0.4 * k / 6) for k in range(7)]
+    cursor(*path[0])
+    press()
+    for (x0, y0), (x1, y1) in zip(path[:-1], path[1:]):
+        for t in np.linspace(0, 1, 4)[1:]:
+            cursor(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
+            shot()
+    release()
+    settle()
+
+    # 2. stamp: drop an image on the window, drag it to the chest's lower half, turn it, Enter
+    win._on_drop(win.window, [str(stamp)])
+    ed.stamp.size = n / 5
+    shot(2)
+    cursor(n / 2, n / 2)
+    press()
+    for t in np.linspace(0, 1, 6)[1:]:
+        cursor(n / 2 + t * (cx - n / 2), n / 2 + t * (top + 0.75 * (bottom - top) - n / 2))
+        shot()
+    release()
+    for _ in range(3):
+        win._on_scroll(win.window, 0, 1)  # wheel: bigger
+        shot()
+    key(glfw.KEY_ENTER)
+    key(glfw.KEY_N)
+    settle()
+
+    # 3. transfer: open the donor (drop a .gma), select the arms-and-shoulders area with a box, transfer tex
+    win._on_drop(win.window, [str(donor)])
+    ed.transfer_what = "tex"
+    shot(3)
+    key(glfw.KEY_B)
+    x0, y0, x1, y1 = cx - 1.6 * half, top - 0.1 * (bottom - top), cx + 1.6 * half, top + 0.35 * (bottom - top)
+    cursor(x0, y0)
+    press()
+    for t in np.linspace(0, 1, 5)[1:]:
+        cursor(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
+        shot()
+    release()
+    shot(2)
+    ed.transfer()
+    ed.clear()
+    settle()
+    shot(4)
+    win.close()
+
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    iio.imwrite(out, np.stack(frames), duration=1000 / args.fps, loop=0)
+    print(f"wrote {out}: {len(frames)} frames, {out.stat().st_size / 1e6:.2f} MB; "
+          f"history: {[r['op'] for r in state.source.avatar.history]}")
+
+
+if __name__ == "__main__":
+    main()
