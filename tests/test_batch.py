@@ -283,9 +283,11 @@ def test_failed_phase1_fails_everyone_with_its_reason(people, ray_runtime, tmp_p
 
 
 @pytest.mark.slow
-def test_an_interrupted_command_resumes(people, ray_runtime, single, tmp_path):
+def test_an_interrupted_command_resumes(people, ray_runtime, tmp_path):
     """``gma batch`` (joining the test's runtime with --address) stopped by Ctrl-C mid-fit exits 130 and
-    leaves the person running; the same batch again resumes the fit from its checkpoint."""
+    leaves the person running; the same batch again resumes the fit from its checkpoint. The fit is long
+    (2 x 40 steps) so that Ctrl-C lands inside it on a quiet machine too; that a resumed fit equals an
+    uninterrupted one is checked by test_a_task_killed_midway_resumes."""
     import subprocess
     from pathlib import Path
 
@@ -294,7 +296,8 @@ def test_an_interrupted_command_resumes(people, ray_runtime, single, tmp_path):
     out = tmp_path / "out"
     repo = Path(__file__).resolve().parents[1]
     options = ["--resolution", "48", "--checkpoint-every", "1", "--log-every", "1", "--preview-every", "0",
-               "--stage1-steps", "3", "--stage2-steps", "3", "--avatar.feature-dim", "8", "--avatar.fine-per-face", "1"]
+               "--stage1-steps", "40", "--stage2-steps", "40", "--avatar.feature-dim", "8",
+               "--avatar.fine-per-face", "1"]
     cmd = [sys.executable, "-m", "gma.cli", "batch", people["p1"].source, "-o", str(out), "--steps", "fit", "--quiet",
            "--address", ray_runtime.get_runtime_context().gcs_address, *options]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")])}
@@ -308,6 +311,6 @@ def test_an_interrupted_command_resumes(people, ray_runtime, single, tmp_path):
     assert proc.returncode == 130, output[-2000:]
     assert json.loads((out / "p1" / "status.json").read_text())["state"] == "running"
 
-    rows = run_batch([people["p1"]], out, _batch(steps=("fit",)), preset("quick", **TINY), progress=False)
-    assert rows[0]["status"] == "done" and 0 < rows[0]["resumed_from"] < 6
-    _same_avatar(out / "p1" / "avatar.gma", single["p1"][0])
+    long_fit = preset("quick", **{**TINY, "stage1_steps": 40, "stage2_steps": 40})
+    rows = run_batch([people["p1"]], out, _batch(steps=("fit",)), long_fit, progress=False)
+    assert rows[0]["status"] == "done" and 0 < rows[0]["resumed_from"] < 80
