@@ -7,6 +7,7 @@ lavapipe), or any other text, matched case-insensitively against the adapter's d
 from __future__ import annotations
 
 import os
+import tempfile
 
 import wgpu
 
@@ -52,9 +53,19 @@ def _matches(adapter: wgpu.GPUAdapter, wanted: str) -> bool:
     return wanted in text.lower()
 
 
+def _runtime_dir() -> None:
+    """Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid" on every start without a private runtime
+    folder (containers, CI, cron); give them one when the session has none."""
+    current = os.environ.get("XDG_RUNTIME_DIR")
+    if current and os.path.isdir(current) and os.access(current, os.W_OK):
+        return
+    os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="gma-xdg-")
+
+
 def select_adapter(preference: str | None = None) -> wgpu.GPUAdapter:
     """Return the best adapter, honouring ``preference`` (default: ``$GMA_ADAPTER`` or ``auto``)."""
     wanted = (preference or os.environ.get("GMA_ADAPTER") or "auto").strip().lower()
+    _runtime_dir()
     adapters = list(wgpu.gpu.enumerate_adapters_sync())
     if wanted != "auto":
         adapters = [a for a in adapters if _matches(a, wanted)]
