@@ -29,6 +29,7 @@ import torch
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
+sys.path.insert(0, str(REPO / "benchmarks"))  # video_fit's joint helpers
 IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
 KEYS = ("psnr", "psnr_bbox", "ssim_bbox", "mask_iou")
 
@@ -108,10 +109,31 @@ def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx) -> None
         avatar, fit_s = _fit(seq, work / f"synth_{tag}.gma", refine, body, ctx)
         res = _eval(avatar, gt, "test_pose", work / f"synth_{tag}.eval", steps, body, ctx)
         rows.append(_row(name, res, fit_s))
+    print(f"  training-frame joints vs truth (13 COCO joints, px at {size} px): estimated {_joint_px(gt, est, None)}, "
+          f"refined in the fit {_joint_px(gt, est, work / 'synth_estimated_refined.body.npz')}")
     print(f"held-out novel poses of the ground truth (true poses and images, 192 px; test-time fitting "
           f"{steps} steps per frame):")
     print(_header())
     print("\n".join(rows))
+
+
+def _joint_px(gt, est, refined_body) -> str:
+    """Mean (median) pixel distance between the COCO joints of the estimated (or refined) training poses
+    and the true ones, each projected through its own sequence's camera."""
+    from types import SimpleNamespace
+
+    from video_fit import JOINTS, _points_uv
+
+    from gma.body import load_body
+    from gma.body.params import load_body as load_params
+    from gma.video.rig import AnnyRig
+
+    rig = AnnyRig(load_body("anny"))
+    idx = [rig.index(n) for n in JOINTS]
+    src = est if refined_body is None else SimpleNamespace(body=load_params(refined_body))
+    truth = _points_uv(rig, gt, gt.cameras.frame)[gt.split("train")][:, idx]
+    err = np.linalg.norm(_points_uv(rig, src, est.cameras.frame)[:, idx] - truth, axis=-1)
+    return f"{err.mean():.2f} ({np.median(err):.2f})"
 
 
 def iper(work: Path, steps: int, body, ctx, figure: Path) -> None:
