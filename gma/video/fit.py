@@ -56,7 +56,9 @@ class FitConfig:
     # Pull of the phenotype to 0.5. At 0.01 (with 60 stage-3 steps on 2 silhouettes each) the phenotype
     # stayed within 0.05 of average on the iPER clip; at 0.001 with 150 steps on 4 silhouettes it moved
     # (weight 0.71, muscle 0.28) and the fit got closer on both independent checks: mask IoU 0.738 ->
-    # 0.768, landmark reprojection 6.0 -> 5.7 px.
+    # 0.768, landmark reprojection 6.0 -> 5.7 px; on a synthetic turn 0.769 -> 0.786 and 2.62 -> 2.39 px,
+    # though the phenotype did not come closer to the true one there (gender 0.58 for 0.89): silhouettes
+    # and landmarks do not pin the six phenotype values down one by one.
     w_shape: float = 0.001
     fit_shape: bool = True  # estimate the phenotype (else the average person)
     fit_hands: bool = True  # estimate finger bones where hand landmarks exist
