@@ -175,6 +175,10 @@ def test_pipeline_on_synthetic_clip(tmp_path, synth_clip, rig, anny_body):
     assert report["mask_iou_mean"] > PIPELINE_IOU
     saved = json.loads((out / "video_report.json").read_text())
     assert saved["frames_used"] == 10 and (out / "video_contact_sheet.png").is_file()
+    # the fitted body shape is reported by name, the same values as the sequence's phenotype
+    named = saved["phenotype_named"]
+    assert list(named) == list(anny_body.param_spaces["shape"].labels)
+    np.testing.assert_allclose(list(named.values()), seq.body.arrays["phenotype"], atol=1e-4)
     # Resumable: a second run reuses every detection and the fit.
     _, again = estimate_sequence(clip, out, config=cfg, progress=False, anny=anny_body, overwrite=True)
     assert again["frames_detect_reused"] == 10 and again["fit_resumed_from_cache"]

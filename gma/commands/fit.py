@@ -4,6 +4,9 @@ the resolved config, checkpoint, metrics and previews go to ``<stem>.fit/`` besi
 for ``-o me.gma``). ``--resume`` continues an interrupted fit from its last checkpoint; an existing avatar
 is replaced only with ``--force``.
 
+Sequences from ``gma import video`` (estimated poses) also get per-frame pose corrections, learnt with
+the avatar (``--pose.refine auto|on|off``); the refined poses go to ``<output stem>.body.npz``.
+
 With several sequences (``gma fit SEQ1 SEQ2 ... -o DIR``) the decoders are shared, as in the paper: each
 sequence gets its own avatar (``DIR/<sequence>.gma``, its own features and body identity) and the
 decoders trained over all of them go to ``DIR/decoders.gma``. A new identity then fits only its
@@ -39,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from gma.data import read_sequence
     from gma.train.config import preset
     from gma.train.outputs import prepare_fit_outputs
-    from gma.train.trainer import Trainer, work_dir
+    from gma.train.trainer import Trainer, refined_body_path, work_dir
 
     if args.resume and args.force:
         raise InputError("--resume and --force contradict each other: continue the fit, or start it over")
@@ -54,4 +57,10 @@ def run(args: argparse.Namespace) -> int:
         written += f" and the shared decoders {trainer.out / 'decoders.gma'}"
     print(f"wrote {written} ({avatar.info['fit_seconds']} s, {avatar.info['steps']} steps); "
           f"config, metrics and previews in {work_dir(trainer.out)}")
+    for sub in trainer.subjects:
+        if sub.poses is not None:
+            r = sub.avatar.info["pose_refinement"]
+            print(f"refined poses of {sub.seq.root} in {refined_body_path(sub.out)} (mean correction "
+                  f"{r['mean_bone_deg']:.1f} deg per bone, root {r['mean_root_deg']:.1f} deg / "
+                  f"{r['mean_root_shift_cm']:.1f} cm)")
     return 0

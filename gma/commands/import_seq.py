@@ -107,6 +107,9 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
           f"{report['frames_detected']}/{report['frames_used']} frames ({report['frames_interpolated']} "
           f"interpolated), mask IoU of the fitted body {report['mask_iou_mean']:.3f}"
           + ("" if err is None else f", reprojection error {err:.1f} px"))
+    if "phenotype_named" in report:
+        print("body shape (Anny phenotype, 0-1, 0.5 = average): "
+              + ", ".join(f"{k} {v:.2f}" for k, v in report["phenotype_named"].items()))
     print(f"report: {seq.root / 'video_report.json'}; overlays: {seq.root / 'video_contact_sheet.png'}")
     return 0
 
@@ -202,7 +205,8 @@ def register(subparsers) -> None:
                     "default: a static camera")
     vd.add_argument("--focal", type=positive_float, default=None, help="focal length in pixels when estimating "
                     "(default: the longer image side)")
-    vd.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
+    vd.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 150],
+                    metavar=("ROOT", "POSE", "SHAPE"),
                     help="body fit steps per stage (root only; all bones; bones + phenotype + silhouette)")
     masks = vd.add_mutually_exclusive_group(required=False)
     masks.add_argument("--alpha", action="store_true", help="masks from the video's alpha channel")

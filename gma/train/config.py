@@ -8,9 +8,10 @@ from dataclasses import asdict, dataclass, fields
 
 from gma.avatar.config import AvatarConfig, doc
 
-__all__ = ["PRESETS", "FitConfig", "LossWeights", "preset"]
+__all__ = ["PRESETS", "FitConfig", "LossWeights", "PoseRefineConfig", "preset"]
 
 TRAINING_MODES = ("two_stage", "one_stage")
+REFINE_MODES = ("auto", "on", "off")
 
 
 @dataclass
@@ -33,6 +34,26 @@ class LossWeights:
                               "only): keeps surfels on the morphed mesh. Without it Adam, which normalises a "
                               "tiny but biased gradient, drove d to -1 cm on most surfels: the skin sank "
                               "below the inner eye/mouth cavities, which then showed through the face")
+
+
+@dataclass
+class PoseRefineConfig:
+    """Per-frame pose corrections learnt with the avatar (``--pose.*``)."""
+
+    refine: str = doc("auto", "auto (on for sequences from 'gma import video', whose poses are estimated), "
+                              "on, or off (trusted poses)")
+    lr_rotation: float = doc(0.01, "Adam learning rate of the bone rotation corrections (radians)")
+    lr_translation: float = doc(0.005, "Adam learning rate of the root translation corrections (metres)")
+    prior: float = doc(0.01, "pull of the corrections toward the input poses: weight of the mean squared "
+                             "rotation correction (rad^2, mean over bones) and root shift (per 30 cm)^2")
+    smooth: float = doc(0.1, "smoothness: weight of the squared difference between the corrections of "
+                             "frames adjacent in the sequence")
+    start: float = doc(0.25, "fraction of stage 1 before the poses start learning (the avatar first gets "
+                             "a rough shape and colour to align against)")
+
+    def __post_init__(self):
+        if self.refine not in REFINE_MODES:
+            raise ValueError(f"--pose.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
 
 
 def _stage2_weights() -> LossWeights:
@@ -68,6 +89,8 @@ class FitConfig:
                                               metadata={"doc": "stage 2 loss weights"})
     avatar: AvatarConfig = dataclasses.field(default_factory=AvatarConfig,
                                              metadata={"doc": "the representation"})
+    pose: PoseRefineConfig = dataclasses.field(default_factory=PoseRefineConfig,
+                                               metadata={"doc": "per-frame pose corrections"})
 
     def __post_init__(self):
         if self.training not in TRAINING_MODES:
@@ -85,7 +108,8 @@ class FitConfig:
     @staticmethod
     def from_dict(d: dict) -> FitConfig:
         d = dict(d)
-        for name, cls in (("weights1", LossWeights), ("weights2", LossWeights), ("avatar", AvatarConfig)):
+        for name, cls in (("weights1", LossWeights), ("weights2", LossWeights), ("avatar", AvatarConfig),
+                          ("pose", PoseRefineConfig)):
             if name in d and isinstance(d[name], dict):
                 d[name] = cls(**d[name])
         known = {f.name for f in fields(FitConfig)}

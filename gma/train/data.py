@@ -19,7 +19,8 @@ __all__ = ["FrameSet", "load_frames"]
 class FrameSet:
     """T frames. images [T, h, w, 3] and masks [T, h, w, 1] in [0, 1]; K [T, 3, 3] (scaled to h × w);
     w2c [T, 4, 4]; rest [T, V, 3] body rest vertices (shape + expression); bones [T, J, 4, 4];
-    indices [T] frame numbers in the sequence; shape [S] the body identity."""
+    indices [T] frame numbers in the sequence; shape [S] the body identity; poses [T, ...] the body's
+    per-frame "pose" parameters the bones were made from (Anny: [T, J, 4, 4] local-ref transforms)."""
 
     images: torch.Tensor
     masks: torch.Tensor
@@ -29,6 +30,7 @@ class FrameSet:
     bones: torch.Tensor
     indices: list[int]
     shape: torch.Tensor
+    poses: torch.Tensor
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -57,7 +59,7 @@ def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0) -> 
     s = min(1.0, resolution / max(seq.width, seq.height))
     h, w = max(8, round(seq.height * s)), max(8, round(seq.width * s))
     sx, sy = w / seq.width, h / seq.height
-    images, masks, Ks, w2cs, rests, bones = [], [], [], [], [], []
+    images, masks, Ks, w2cs, rests, bones, poses = [], [], [], [], [], [], []
     with torch.no_grad():
         for i in idx:
             images.append(_resize(seq.image(i).astype(np.float32) / 255.0, (h, w)))
@@ -71,7 +73,8 @@ def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0) -> 
             params = body.check_params(frame_params(seq.body.model, seq.body.frame(i)))
             rests.append(body.rest_vertices(params).float())
             bones.append(body.bone_transforms(params).float())
+            poses.append(params["pose"].float())
     frames = FrameSet(torch.stack(images), torch.stack(masks), torch.stack(Ks), torch.stack(w2cs),
-                      torch.stack(rests), torch.stack(bones), list(idx), params["shape"].clone())
+                      torch.stack(rests), torch.stack(bones), list(idx), params["shape"].clone(), torch.stack(poses))
     check_frames(seq, frames, body)
     return frames

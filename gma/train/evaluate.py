@@ -1,6 +1,8 @@
 """``gma eval``: render a fitted avatar at the frames of a split and compare with the images — PSNR and
-SSIM (and LPIPS when available) per frame and averaged, as JSON and a text table, plus side-by-side
-images (target | render | error ×4)."""
+SSIM over the image and inside the person's bounding box (and LPIPS when available), and mask IoU of the
+rendered alpha, per frame and averaged, as JSON and a text table, plus side-by-side images
+(target | render | error ×4). With ``refine_steps`` the frames' poses are also optimised against their
+images with the avatar frozen (test-time pose fitting) and the scores after it reported beside."""
 
 from __future__ import annotations
 
@@ -16,7 +18,8 @@ from gma.render.image_io import save_png
 from gma.synth.generate import gt_mesh
 from gma.train.data import load_frames
 from gma.train.losses import GeometryTerms, load_lpips
-from gma.train.metrics import psnr, ssim
+from gma.train.metrics import box_metrics, mask_iou, psnr, ssim
+from gma.train.pose_refine import PoseRefineConfig, refine_frozen
 from gma.train.render_step import render_frame
 
 __all__ = ["EVAL_SPLITS", "evaluate", "evaluate_splits", "format_table", "geometry_metrics"]
@@ -26,33 +29,34 @@ EVAL_SPLITS = ("test_pose", "test_view")
 
 
 def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None, resolution: int = 512,
-             background: float = 0.5, body=None, ctx=None, images: int = 4, use_lpips: bool = True) -> dict:
+             background: float = 0.5, body=None, ctx=None, images: int = 4, use_lpips: bool = True,
+             refine_steps: int = 0, refine_resolution: int = 192, refine: PoseRefineConfig | None = None,
+             progress: bool = False) -> dict:
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
-    ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim[, lpips]}], "mean": {...}}."""
+    ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim, psnr_bbox, ssim_bbox,
+    mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "frames", "mean", "poses"} when
+    ``refine_steps`` > 0: each frame's pose first optimised for that many steps at ``refine_resolution``
+    against its image with the avatar frozen (``refine``: learning rates and prior), then scored again."""
 
     body = body or load_body(avatar.body_name)
     frames = load_frames(seq, body, split, resolution)
     lp = load_lpips(verbose=True) if use_lpips else None
-    decoded = avatar.decode()
-    rows = []
-    keep = set(np.linspace(0, len(frames) - 1, min(images, len(frames))).round().astype(int).tolist())
     with torch.no_grad():
-        for t in range(len(frames)):
-            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=False)
-            target = frames.target(t, background)
-            render = out.color.clamp(0, 1)
-            row = {"frame": frames.indices[t], "psnr": psnr(render, target), "ssim": float(ssim(render, target))}
-            if lp is not None:
-                row["lpips"] = float(lp(render, target))
-            rows.append(row)
-            if out_dir is not None and t in keep:
-                err = ((render - target).abs() * 4).clamp(0, 1)
-                save_png(Path(out_dir) / f"{split}_{frames.indices[t]:06d}.png",
-                         torch.cat([target, render, err], 1).numpy())
-    keys = [k for k in rows[0] if k != "frame"]
+        decoded = avatar.decode()
+    rows = _score(decoded, body, frames, None, background, ctx, lp, out_dir, split, images)
     result = {"split": split, "sequence": str(seq.root), "resolution": list(frames.images.shape[1:3]),
-              "frames": rows, "mean": {k: float(np.mean([r[k] for r in rows])) for k in keys}}
+              "frames": rows, "mean": _mean(rows)}
+    if refine_steps > 0:
+        small = load_frames(seq, body, split, min(refine_resolution, resolution))
+        corr = refine_frozen(decoded, body, small, refine_steps, refine or PoseRefineConfig(), background, ctx,
+                             progress=progress)
+        poses = corr.all_poses()
+        with torch.no_grad():
+            bones = body.bone_transforms({"pose": poses, "shape": frames.shape})
+        rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images)
+        result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]),
+                             "frames": rows_r, "mean": _mean(rows_r), "poses": corr.summary()}
     if out_dir is not None:
         out_dir = Path(out_dir)
         atomic_write_json(out_dir / f"metrics_{split}.json", result)
@@ -60,11 +64,40 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     return result
 
 
+def _mean(rows: list[dict]) -> dict:
+    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "frame"}
+
+
+def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str, images: int) -> list[dict]:
+    """Per-frame metrics of ``decoded`` posed with ``bones`` [T, J, 4, 4] (None: the frames' own); writes
+    up to ``images`` side-by-side PNGs named ``<name>_<frame>.png`` into ``out_dir`` when given."""
+    rows = []
+    keep = set(np.linspace(0, len(frames) - 1, min(images, len(frames))).round().astype(int).tolist())
+    with torch.no_grad():
+        for t in range(len(frames)):
+            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=False,
+                                  bones=None if bones is None else bones[t])
+            target = frames.target(t, background)
+            render = out.color.clamp(0, 1)
+            row = {"frame": frames.indices[t], "psnr": psnr(render, target), "ssim": float(ssim(render, target)),
+                   **box_metrics(render, target, frames.masks[t]), "mask_iou": mask_iou(out.alpha, frames.masks[t])}
+            if lp is not None:
+                row["lpips"] = float(lp(render, target))
+            rows.append(row)
+            if out_dir is not None and t in keep:
+                err = ((render - target).abs() * 4).clamp(0, 1)
+                save_png(Path(out_dir) / f"{name}_{frames.indices[t]:06d}.png",
+                         torch.cat([target, render, err], 1).numpy())
+    return rows
+
+
 def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path | None = None,
                     resolution: int = 512, background: float = 0.5, body=None, ctx=None, images: int = 4,
-                    report=print) -> dict:
+                    report=print, refine_steps: int = 0, refine_resolution: int = 192,
+                    refine: PoseRefineConfig | None = None) -> dict:
     """The one evaluation loop of ``gma eval``, ``gma demo`` and the benchmarks: :func:`evaluate` on each
-    of ``splits`` that ``seq`` has (``report`` gets each table), then the mesh layer's geometry scores
+    of ``splits`` that ``seq`` has (``report`` gets each table; ``refine_*``: test-time pose fitting, see
+    :func:`evaluate`), then the mesh layer's geometry scores
     when the sequence has a ground-truth mesh (written to ``out_dir/geometry.json``).
 
     Returns {split: result of :func:`evaluate`} plus "geometry": dict or None."""
@@ -73,7 +106,8 @@ def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path
         if not seq.split(split):
             continue
         results[split] = evaluate(avatar, seq, split, out_dir, resolution, background, body=body, ctx=ctx,
-                                  images=images)
+                                  images=images, refine_steps=refine_steps, refine_resolution=refine_resolution,
+                                  refine=refine, progress=report is not None)
         if report is not None:
             report(format_table(results[split]))
     geometry = geometry_metrics(avatar, seq)
@@ -115,13 +149,29 @@ def geometry_metrics(avatar: Avatar, seq) -> dict | None:
 
 
 def format_table(result: dict) -> str:
-    """A plain-text table: one row per frame, then the mean."""
-    keys = [k for k in result["mean"]]
+    """A plain-text table: one row per frame, then the mean; after test-time pose fitting, the same
+    table of the refined scores below and a line of mean differences."""
     lines = [f"split {result['split']} ({len(result['frames'])} frames, {result['resolution'][1]}x"
-             f"{result['resolution'][0]} px)", "frame   " + "  ".join(f"{k:>7}" for k in keys)]
-    for r in result["frames"]:
-        lines.append(f"{r['frame']:>6}  " + "  ".join(f"{r[k]:7.4f}" if k != "psnr" else f"{r[k]:7.2f}"
-                                                       for k in keys))
-    m = result["mean"]
-    lines.append("  mean  " + "  ".join(f"{m[k]:7.4f}" if k != "psnr" else f"{m[k]:7.2f}" for k in keys))
+             f"{result['resolution'][0]} px)"] + _rows(result)
+    ref = result.get("refined")
+    if ref is not None:
+        lines.append(f"after test-time pose fitting ({ref['steps']} steps per frame at {ref['resolution'][1]}x"
+                     f"{ref['resolution'][0]} px, avatar frozen; mean correction {ref['poses']['mean_bone_deg']:.1f} "
+                     f"deg per bone, root {ref['poses']['mean_root_deg']:.1f} deg / "
+                     f"{ref['poses']['mean_root_shift_cm']:.1f} cm)")
+        lines += _rows(ref)
+        lines.append("  gain  " + "  ".join(_fmt(k, ref["mean"][k] - result["mean"][k]) for k in result["mean"]))
     return "\n".join(lines)
+
+
+def _fmt(key: str, value: float) -> str:
+    return f"{value:9.2f}" if key.startswith("psnr") else f"{value:9.4f}"
+
+
+def _rows(result: dict) -> list[str]:
+    keys = list(result["mean"])
+    lines = ["frame   " + "  ".join(f"{k:>9}" for k in keys)]
+    for r in result["frames"]:
+        lines.append(f"{r['frame']:>6}  " + "  ".join(_fmt(k, r[k]) for k in keys))
+    lines.append("  mean  " + "  ".join(_fmt(k, result["mean"][k]) for k in keys))
+    return lines

@@ -1,4 +1,5 @@
-"""Image metrics in torch: PSNR and SSIM (gaussian window), on [H, W, C] images in [0, 1]."""
+"""Image metrics in torch: PSNR and SSIM (gaussian window) on [H, W, C] images in [0, 1], the same inside
+the person's bounding box, and mask IoU of a rendered alpha."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-__all__ = ["psnr", "ssim"]
+__all__ = ["box_metrics", "mask_iou", "person_box", "psnr", "ssim"]
 
 
 def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -39,3 +40,32 @@ def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5)
     c1, c2 = 0.01**2, 0.03**2
     s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx**2 + my**2 + c1) * (sxx + syy + c2))
     return s.mean()
+
+
+def person_box(mask: torch.Tensor, pad: float = 0.05) -> tuple[int, int, int, int] | None:
+    """(y0, y1, x0, x1) of the bounding box of ``mask`` [H, W, 1] > 0.5, grown by ``pad`` × its larger side
+    on every side and clipped to the image; None when the mask is empty."""
+    ys, xs = torch.nonzero(mask[..., 0] > 0.5, as_tuple=True)
+    if len(ys) == 0:
+        return None
+    h, w = mask.shape[:2]
+    y0, y1, x0, x1 = int(ys.min()), int(ys.max()) + 1, int(xs.min()), int(xs.max()) + 1
+    m = round(pad * max(y1 - y0, x1 - x0))
+    return max(0, y0 - m), min(h, y1 + m), max(0, x0 - m), min(w, x1 + m)
+
+
+def box_metrics(render: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> dict[str, float]:
+    """PSNR and SSIM of [H, W, 3] images inside the person's bounding box (``person_box`` of ``mask``):
+    full-image scores count the easy uniform background, which is most of a portrait frame. The whole
+    image when the mask is empty."""
+    y0, y1, x0, x1 = person_box(mask) or (0, render.shape[0], 0, render.shape[1])
+    a, b = render[y0:y1, x0:x1], target[y0:y1, x0:x1]
+    return {"psnr_bbox": psnr(a, b), "ssim_bbox": float(ssim(a, b))}
+
+
+def mask_iou(alpha: torch.Tensor, mask: torch.Tensor, threshold: float = 0.5) -> float:
+    """Intersection over union of rendered ``alpha`` and the person ``mask`` (both [H, W, 1] in [0, 1]),
+    each thresholded at ``threshold``; 1 when both are empty."""
+    a, m = alpha > threshold, mask > threshold
+    union = int((a | m).sum())
+    return 1.0 if union == 0 else int((a & m).sum()) / union

@@ -13,12 +13,15 @@ __all__ = ["render_frame"]
 
 
 def render_frame(decoded: DecodedAvatar, body, frames: FrameSet, t: int, background: float, ctx=None,
-                 cull: bool = True, on_means=None) -> tuple[RenderOutput, PosedSurfels]:
+                 cull: bool = True, on_means=None, bones: torch.Tensor | None = None,
+                 ) -> tuple[RenderOutput, PosedSurfels]:
     """Pose ``decoded`` for frame ``t`` of ``frames`` and render it at the frames' resolution.
 
+    ``bones`` [J, 4, 4] (optional) replaces the frame's precomputed bone transforms: refined poses.
     ``on_means`` (optional) is registered as a gradient hook on the surfel means handed to the renderer:
     it fires when the renderer's backward has finished (the trainer times that split with it)."""
-    posed = pose_surfels(decoded, body.faces, body.skin_indices, body.skin_weights, frames.rest[t], frames.bones[t])
+    bones = frames.bones[t] if bones is None else bones
+    posed = pose_surfels(decoded, body.faces, body.skin_indices, body.skin_weights, frames.rest[t], bones)
     means, quats, scales, colors, opac = (posed[k] for k in ("means", "quats", "scales", "colors", "opacities"))
     if cull:
         keep = backfacing_mask(posed["vertices"], body.faces, decoded.binding.face_id, frames.w2c[t])

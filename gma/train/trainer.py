@@ -6,6 +6,10 @@ set of shared decoders (written to ``decoders.gma`` for ``--decoders``).
 Everything a run produces lands in a work folder beside the output (``avatar.gma`` -> ``avatar.fit/``):
 ``config.json`` (resolved), ``checkpoint.safetensors`` (atomic, every ``checkpoint_every`` steps),
 ``metrics.json`` (loss history, timing split), ``previews/`` (render | target images).
+
+Sequences with estimated poses (from ``gma import video``) also learn per-frame pose corrections
+(``gma.train.pose_refine``); the refined poses are written beside the avatar as ``<avatar>.body.npz``, a
+``body.npz`` for the same sequence.
 """
 
 from __future__ import annotations
@@ -28,14 +32,20 @@ from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
 from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
 from gma.train.metrics import psnr
+from gma.train.pose_refine import PoseCorrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
 
-__all__ = ["Stage", "Trainer", "work_dir"]
+__all__ = ["Stage", "Trainer", "refined_body_path", "work_dir"]
 
 
 def work_dir(out: Path) -> Path:
     """The folder holding a fit's config, checkpoint, metrics and previews: ``<out>.fit`` beside it."""
     return out.with_name(out.stem + ".fit")
+
+
+def refined_body_path(out: Path) -> Path:
+    """Where a fit with pose refinement writes the refined poses: ``<out>.body.npz`` beside the avatar."""
+    return out.with_name(out.stem + ".body.npz")
 
 
 @dataclass
@@ -70,6 +80,7 @@ class Subject:
     frames: FrameSet
     avatar: Avatar
     out: Path
+    poses: PoseCorrections | None = None  # learnt pose corrections (sequences with estimated poses)
 
 
 def subject_outputs(out: Path, seqs: list) -> list[Path]:
@@ -116,12 +127,17 @@ class Trainer:
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
                 avatar.model.share_decoders_with(self.subjects[0].avatar.model)
-            self.subjects.append(Subject(o.stem, s, frames, avatar, o))
+            poses = PoseCorrections(self.body, frames.poses, frames.indices) if refine_wanted(cfg.pose, s) else None
+            self.subjects.append(Subject(o.stem, s, frames, avatar, o, poses))
         first = self.subjects[0]
         self.seq, self.frames, self.avatar, self.model = first.seq, first.frames, first.avatar, first.avatar.model
         self.models = [s.avatar.model for s in self.subjects]
         # What the checkpoint holds and the optimiser walks (shared decoders appear once in parameters()).
-        self.net = self.model if len(self.models) == 1 else nn.ModuleList(self.models)
+        self.avatar_net = self.model if len(self.models) == 1 else nn.ModuleList(self.models)
+        self.pose_sets = [s.poses for s in self.subjects if s.poses is not None]
+        self.net = self.avatar_net
+        if self.pose_sets:  # checkpoint keys change only for fits that refine poses
+            self.net = nn.ModuleDict({"avatar": self.avatar_net, "poses": nn.ModuleList(self.pose_sets)})
         self.frozen_decoders = False
         if cfg.decoders:
             state = load_decoders(cfg.decoders, cfg.avatar)
@@ -130,6 +146,7 @@ class Trainer:
                 raise ValueError(f"{cfg.decoders}: unexpected decoder tensors {unexpected}")
             self.frozen_decoders = True
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
+        self.pose_start = round(cfg.pose.start * self.stages[0].steps) if self.stages else 0
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
         need_lpips = any(s.weights.lpips > 0 for s in self.stages)
         self.lpips = load_lpips(verbose=progress) if need_lpips else None
@@ -143,7 +160,7 @@ class Trainer:
         learn = {id(p) for m in self.models for g in stage.groups for p in m.param_groups()[g]}
         feature_ids = None if self.model.direct else {id(p) for m in self.models for p in (m.f_geo, m.f_tex)}
         feats, decs = [], []
-        for p in self.net.parameters():
+        for p in self.avatar_net.parameters():
             on = id(p) in learn
             is_feature = feature_ids is None or id(p) in feature_ids
             if self.frozen_decoders and not is_feature:
@@ -154,7 +171,22 @@ class Trainer:
         param_groups = [{"params": feats, "lr": self.cfg.lr_features, "base_lr": self.cfg.lr_features}]
         if decs:
             param_groups.append({"params": decs, "lr": self.cfg.lr_decoders, "base_lr": self.cfg.lr_decoders})
+        if self.pose_sets:  # pose corrections learn in every stage
+            pc = self.cfg.pose
+            rot = [p for ps in self.pose_sets for p in ps.rotation_params()]
+            shift = [p for ps in self.pose_sets for p in ps.translation_params()]
+            param_groups += [{"params": rot, "lr": pc.lr_rotation, "base_lr": pc.lr_rotation},
+                             {"params": shift, "lr": pc.lr_translation, "base_lr": pc.lr_translation}]
         return torch.optim.Adam(param_groups, eps=1e-15)
+
+    def _bones(self, subject: int, t: int, learn: bool) -> torch.Tensor | None:
+        """Bone transforms [J, 4, 4] of training frame ``t`` from its corrected pose (differentiable in
+        the correction when ``learn``), or None when the subject's poses are not refined."""
+        sub = self.subjects[subject]
+        if sub.poses is None:
+            return None
+        pose = sub.poses.pose(t, detach=not learn)
+        return self.body.bone_transforms({"pose": pose, "shape": sub.frames.shape})
 
     def _locate(self, step: int) -> tuple[int, int]:
         """(stage index, step within the stage) of global ``step``."""
@@ -174,16 +206,20 @@ class Trainer:
         return subject, int(torch.randperm(n, generator=g)[k])
 
     # -- one step --------------------------------------------------------------------------------------
-    def _loss(self, stage: Stage, frame: tuple[int, int], timers: dict) -> tuple[torch.Tensor, dict, dict]:
+    def _loss(self, stage: Stage, frame: tuple[int, int], timers: dict,
+              learn_poses: bool = False) -> tuple[torch.Tensor, dict, dict]:
         w, cfg = stage.weights, self.cfg
         subject, t = frame
         model, frames = self.models[subject], self.subjects[subject].frames
+        poses = self.subjects[subject].poses
         t0 = time.perf_counter()
         dec = model.decode(stage.layer)
+        bones = self._bones(subject, t, learn_poses)
         t1 = time.perf_counter()
         marks = {}
         out, posed = render_frame(dec, self.body, frames, t, cfg.background, self.ctx, cfg.cull_backfaces,
-                                  on_means=lambda g: marks.setdefault("render_bwd_done", time.perf_counter()) and None)
+                                  on_means=lambda g: marks.setdefault("render_bwd_done", time.perf_counter()) and None,
+                                  bones=bones)
         t2 = time.perf_counter()
         target = frames.target(t, cfg.background)
         l1, dssim = picture_loss(out.color, target)
@@ -200,6 +236,9 @@ class Trainer:
         if w.normal > 0:
             terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, frames.K[t])
         loss = sum(getattr(w, k) * v for k, v in terms.items())
+        if poses is not None and learn_poses:  # its weights are in cfg.pose, not the stage's
+            terms["pose_reg"] = poses.regulariser(t, cfg.pose)
+            loss = loss + terms["pose_reg"]
         timers["decode"] += t1 - t0
         timers["posing_render_fwd"] += t2 - t1
         rec = {k: float(v.detach()) for k, v in terms.items()}
@@ -213,7 +252,7 @@ class Trainer:
             total = sum(s.steps for s in self.stages)
             layer = self.stages[self._locate(min(step, total) - 1)[0]].layer if step > 0 else self.stages[0].layer
             out, _ = render_frame(self.model.decode(layer), self.body, self.frames, 0, self.cfg.background,
-                                  self.ctx, cull=False)
+                                  self.ctx, cull=False, bones=self._bones(0, 0, learn=False))
         img = torch.cat([out.color, self.frames.target(0, self.cfg.background)], 1).clamp(0, 1).numpy()
         save_png(self.dir / "previews" / f"step_{step:06d}.png", img)
 
@@ -252,7 +291,7 @@ class Trainer:
             frac = local / max(1, stage.steps)
             for g in opt.param_groups:
                 g["lr"] = g["base_lr"] * self.cfg.lr_decay**frac
-            loss, rec, marks = self._loss(stage, self._frame(step), self.timing)
+            loss, rec, marks = self._loss(stage, self._frame(step), self.timing, learn_poses=step >= self.pose_start)
             tb = time.perf_counter()
             loss.backward()
             tc = time.perf_counter()
@@ -291,7 +330,11 @@ class Trainer:
                                "final_train_psnr": mine[-1]["psnr"] if mine else None}
             if shared:
                 sub.avatar.info["decoders_shared_with"] = shared
+            if sub.poses is not None:
+                sub.avatar.info["pose_refinement"] = sub.poses.summary()
             sub.avatar.save(sub.out)
+            if sub.poses is not None:
+                save_refined_body(refined_body_path(sub.out), sub.seq, sub.frames.indices, sub.poses.all_poses())
         if shared:
             save_decoders(self.out / "decoders.gma", self.model,
                           {"sequences": [str(s.seq.root) for s in self.subjects], "steps": total})
@@ -303,5 +346,8 @@ class Trainer:
                    "resolution": list(self.frames.images.shape[1:3])}
         if shared:
             metrics["subjects"] = shared
+        if self.pose_sets:
+            metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
+                                          for s in self.subjects if s.poses is not None}
         atomic_write_json(self.dir / "metrics.json", metrics)
         return self.avatar

@@ -249,6 +249,8 @@ def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_inf
         "camera": {"focal_px": float(K[0, 0]), "principal_point": [float(K[0, 2]), float(K[1, 2])],
                    "focal_source": "user" if cfg.focal is not None else "default (longer image side)"},
         "phenotype": [round(float(x), 4) for x in phenotype],
+        "phenotype_named": {name: round(float(x), 4) for name, x in
+                            zip(anny.param_spaces["shape"].labels, phenotype, strict=True)},
         "contact_sheet_frames": [int(t) for t in sheet_idx],
     }
     if fit_info:
