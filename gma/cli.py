@@ -18,6 +18,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show the traceback of every error")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(gma.commands.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):  # helpers of the commands (option builders, the demo's stages)
+            continue
         module = importlib.import_module(f"gma.commands.{info.name}")
         if hasattr(module, "register"):
             module.register(sub)
