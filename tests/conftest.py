@@ -2,12 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
-
 import pytest
-
-os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
 
 # Fixtures that hand out a GPU context: a test that takes one is a `gpu` test whether or not it says so.
 GPU_FIXTURES = {"gpu", "gpu_no_float_atomics", "small_body_source"}

@@ -59,7 +59,11 @@ def _runtime_dir() -> None:
     current = os.environ.get("XDG_RUNTIME_DIR")
     if current and os.path.isdir(current) and os.access(current, os.W_OK):
         return
-    os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="gma-xdg-")
+    # One folder per user, reused by every run (the Makefile's choice too), private as the spec asks.
+    user = os.getuid() if hasattr(os, "getuid") else 0
+    folder = os.path.join(tempfile.gettempdir(), f"gma-xdg-{user}")
+    os.makedirs(folder, mode=0o700, exist_ok=True)
+    os.environ["XDG_RUNTIME_DIR"] = folder
 
 
 def select_adapter(preference: str | None = None) -> wgpu.GPUAdapter:
