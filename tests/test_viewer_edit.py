@@ -85,6 +85,8 @@ def test_brush_stroke_is_one_undoable_record_and_undo_restores_the_file(avatar_s
     assert len(Avatar.load(out).history) == 1
     ed.revert(0)
     assert ed.dirty and s.source.avatar.to_bytes() == original
+    ed.redo()  # back to the state that was saved: clean again
+    assert not ed.dirty
 
 
 @pytest.mark.slow

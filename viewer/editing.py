@@ -107,7 +107,7 @@ class EditTools:
         self.donor_thumbnail: np.ndarray | None = None  # [h, w, 4] uint8 render of the donor
         self.transfer_what = "tex"
         self.version = 0  # edits applied (including undo / redo)
-        self.saved_version = 0
+        self.saved_mark = self._history_mark()  # the history as last saved (or opened)
         self.last_change_ms = 0.0
         self.stroke: StrokeStats | None = None
         self.last_stroke = StrokeStats()
@@ -142,9 +142,15 @@ class EditTools:
             self._editor = Editor(self.avatar, self.body, self.state.ctx, decoded=self.source.decoded)
         return self._editor
 
+    def _history_mark(self) -> tuple:
+        """What identifies the avatar's state: its history's length and newest record (undo back to the
+        saved state restores both, so the file is clean again; any new edit adds or replaces a record)."""
+        history = self.avatar.history if self.avatar is not None else []
+        return len(history), id(history[-1]) if history else None
+
     @property
     def dirty(self) -> bool:
-        return self.version != self.saved_version
+        return self.avatar is not None and self._history_mark() != self.saved_mark
 
     @property
     def path(self) -> Path | None:
@@ -662,7 +668,7 @@ class EditTools:
         except OSError as exc:
             raise InputError(f"cannot write {target}: {exc.strerror or exc}") from None
         self.source.path, self.source.name = target, target.name
-        self.saved_version = self.version
+        self.saved_mark = self._history_mark()
         self.state.message = f"saved {target} ({len(self.avatar.history)} history records)"
         return target
 
