@@ -32,7 +32,9 @@ def add_dataclass_options(parser: argparse.ArgumentParser, cls, prefix: str = ""
             add_dataclass_options(parser, type(value), prefix=name + ".")
             continue
         typ = _parse_bool if isinstance(value, bool) else type(value)
-        parser.add_argument("--" + name.replace("_", "-"), dest="cfg:" + name, type=typ, default=None,
+        # SUPPRESS: an option not given leaves no attribute (so the preset decides), and help formatters
+        # that print defaults leave it alone (the help text states the dataclass default).
+        parser.add_argument("--" + name.replace("_", "-"), dest="cfg:" + name, type=typ, default=argparse.SUPPRESS,
                             metavar=type(value).__name__.upper(),
                             help=f"{f.metadata.get('doc', '')} (default {value!r})")
 
