@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine  # noqa: E402
-from benchmarks.viewer_fps import ensure_display  # noqa: E402
+from viewer.display import ensure_display  # noqa: E402
 
 
 def wait_gpu(ctx, probe) -> None:

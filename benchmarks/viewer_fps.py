@@ -9,26 +9,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-
-def ensure_display() -> subprocess.Popen | None:
-    if os.environ.get("DISPLAY"):
-        return None
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        sys.exit("no DISPLAY and no Xvfb: cannot open a window")
-    proc = subprocess.Popen([exe, ":173", "-screen", "0", "1280x1024x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    time.sleep(1.0)
-    os.environ["DISPLAY"] = ":173"
-    return proc
+from viewer.display import ensure_display  # noqa: E402
 
 
 def synced_breakdown(ctx, state, w: int, h: int, frames: int = 3) -> dict[str, float]:
@@ -87,7 +73,7 @@ def main() -> None:
     ap.add_argument("--sample-every", type=int, default=5)
     args = ap.parse_args()
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
-    xvfb = ensure_display()
+    xvfb = ensure_display("1280x1024x24")
     try:
         from gma.core.args import parse_image_size
         from gma.gpu import get_context

@@ -13,30 +13,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import shutil
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-
-def ensure_display() -> subprocess.Popen | None:
-    if os.environ.get("DISPLAY"):
-        return None
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        sys.exit("no DISPLAY and no Xvfb: cannot open a window")
-    for num in range(181, 199):
-        if not os.path.exists(f"/tmp/.X{num}-lock"):
-            break
-    proc = subprocess.Popen([exe, f":{num}", "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    time.sleep(1.0)
-    os.environ["DISPLAY"] = f":{num}"
-    return proc
+from viewer.display import ensure_display  # noqa: E402
 
 
 def make_avatars(folder: Path, fine_per_face: int):
@@ -87,7 +69,7 @@ def main() -> None:
     ap.add_argument("--fps", type=float, default=8.0)
     args = ap.parse_args()
     os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
-    xvfb = ensure_display()
+    xvfb = ensure_display("1024x768x24")
     try:
         with tempfile.TemporaryDirectory(prefix="gma-edit-demo-") as tmp:
             record(args, Path(tmp))
