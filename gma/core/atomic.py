@@ -21,14 +21,16 @@ import numpy as np
 
 from gma.core.errors import OutputExistsError
 
-__all__ = ["atomic_dir", "atomic_write_bytes", "atomic_write_json", "atomic_write_npz"]
+__all__ = ["atomic_dir", "atomic_file", "atomic_write_bytes", "atomic_write_json", "atomic_write_npz",
+           "ordinary_mode"]
 
 
-def _umask() -> int:
-    # The process umask can only be read by setting it; set it straight back.
-    mask = os.umask(0)
+def ordinary_mode(folder: bool = False) -> int:
+    """The permissions a new file (or ``folder``) gets from the umask. mkstemp/mkdtemp make private ones
+    (0600/0700); an output is an ordinary user file, so temporaries are given this before the rename."""
+    mask = os.umask(0)  # the umask can only be read by setting it; set it straight back
     os.umask(mask)
-    return mask
+    return (0o777 if folder else 0o666) & ~mask
 
 
 def _fsync_dir(path: Path) -> None:
@@ -42,13 +44,15 @@ def _fsync_dir(path: Path) -> None:
 
 
 @contextlib.contextmanager
-def _atomic_file(path: Path) -> Iterator[Path]:
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path`` to write; on success it is fsynced and renamed to ``path``
+    (readers see the old file or the complete new one), on an exception removed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
-    os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes it private (0600); outputs get normal permissions
+    os.chmod(tmp_path, ordinary_mode())
     try:
         yield tmp_path
         with open(tmp_path, "rb+") as f:
@@ -62,7 +66,7 @@ def _atomic_file(path: Path) -> Iterator[Path]:
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see either the old file or the complete new one."""
-    with _atomic_file(Path(path)) as tmp:
+    with atomic_file(Path(path)) as tmp:
         tmp.write_bytes(data)
 
 
@@ -85,7 +89,7 @@ def atomic_write_npz(path: str | os.PathLike, **arrays) -> None:
     for key, value in arrays.items():
         if np.asarray(value).dtype == object:
             raise TypeError(f"{path}: array {key!r} has dtype object, which would need pickle")
-    with _atomic_file(Path(path)) as tmp:
+    with atomic_file(Path(path)) as tmp:
         with open(tmp, "wb") as f:
             np.savez(f, **arrays)
 
@@ -103,7 +107,7 @@ def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pat
         raise OutputExistsError(f"{path}: already exists; pass --force to replace it")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
-    os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes it private (0700); a dataset directory is normally shared
+    os.chmod(tmp, ordinary_mode(folder=True))
     try:
         yield tmp
     except BaseException:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+
+from gma.core.atomic import atomic_file
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
@@ -15,22 +15,11 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
 
 
 def save_png(path: str | Path, image: np.ndarray) -> Path:
-    """Write ``image`` ([H, W, 1|3|4] float in [0, 1] or uint8) to ``path`` via a temporary file."""
+    """Write ``image`` ([H, W, 1|3|4] float in [0, 1] or uint8) to ``path`` atomically."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     data = image if image.dtype == np.uint8 else to_uint8(image)
     if data.ndim == 3 and data.shape[2] == 1:
         data = data[..., 0]
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp.png")
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp's files are private; an image is an ordinary user file
-    try:
+    with atomic_file(path) as tmp:
         iio.imwrite(tmp, data, extension=".png")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path

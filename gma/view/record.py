@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.core.atomic import ordinary_mode
 from gma.core.errors import OutputError
 from gma.core.outputs import prepare_output_dir, prepare_output_file
 from gma.view.orbit import CameraPath
@@ -139,10 +140,7 @@ class Recorder:
             import imageio.v3 as iio
 
             iio.imwrite(self._tmp, self._gif_frames[0], extension=".png")
-        # mkstemp/mkdtemp make private files; a rendered video is an ordinary user file.
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self._tmp, (0o777 if self.kind == "frames" else 0o666) & ~umask)
+        os.chmod(self._tmp, ordinary_mode(folder=self.kind == "frames"))
         if self.kind == "frames":
             if self.out.exists():
                 why = not_a_frames_dir(self.out)
