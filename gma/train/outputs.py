@@ -11,11 +11,9 @@ from types import SimpleNamespace
 
 from gma.core.errors import InputError, OutputExistsError
 from gma.core.outputs import prepare_output_file
-from gma.train.trainer import subject_outputs, work_dir
+from gma.train.trainer import CHECKPOINT_NAME, subject_outputs, work_dir
 
 __all__ = ["CHECKPOINT_NAME", "prepare_fit_outputs"]
-
-CHECKPOINT_NAME = "checkpoint.safetensors"
 
 
 def prepare_fit_outputs(out: str | Path, seqs: list, resume: bool = False, force: bool = False) -> list[Path]:

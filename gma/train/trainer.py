@@ -35,7 +35,10 @@ from gma.train.metrics import psnr
 from gma.train.pose_refine import PoseCorrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
 
-__all__ = ["Stage", "Trainer", "refined_body_path", "work_dir"]
+__all__ = ["CHECKPOINT_NAME", "Stage", "Trainer", "refined_body_path", "work_dir"]
+
+# The checkpoint inside a fit's work folder (gma.train.outputs and gma batch look for it there too).
+CHECKPOINT_NAME = "checkpoint.safetensors"
 
 
 def work_dir(out: Path) -> Path:
@@ -259,7 +262,7 @@ class Trainer:
     # -- the loop --------------------------------------------------------------------------------------
     def run(self, resume: bool = False) -> Avatar:
         self.dir.mkdir(parents=True, exist_ok=True)
-        ckpt = self.dir / "checkpoint.safetensors"
+        ckpt = self.dir / CHECKPOINT_NAME
         cfg_json = self.cfg.to_dict()
         total = sum(s.steps for s in self.stages)
         step, elapsed = 0, 0.0
