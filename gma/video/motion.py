@@ -14,7 +14,6 @@ and only lifts the clip as a whole, for jumps).
 from __future__ import annotations
 
 import os
-import shutil
 import time
 from pathlib import Path
 
@@ -26,12 +25,11 @@ from gma.body import load_body
 from gma.body.motion_files import place_on_floor, save_motion
 from gma.body.motions import Motion
 from gma.body.retarget import rotation_between
-from gma.core.errors import GmaError, InputError
+from gma.core.errors import InputError
 from gma.core.outputs import prepare_output_file
 from gma.video.camera import intrinsics
-from gma.video.detect import detect_frames
 from gma.video.frames import read_video
-from gma.video.pipeline import VideoImportConfig, fit_detections, work_dir
+from gma.video.pipeline import VideoImportConfig, detect_person, fit_detections, reusable_work, work_dir
 from gma.video.report import reprojection_errors
 
 __all__ = ["CAMERA_TO_ANNY", "estimate_motion", "upright_motion", "video_fps"]
@@ -80,21 +78,10 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
     timings["decode"] = time.perf_counter() - t0
     work = work_dir(out)
-    existed = work.exists()
-    try:
-        t0 = time.perf_counter()
-        det, reused = detect_frames(frames, work / "detect", progress=progress)
-        timings["detect"] = time.perf_counter() - t0
-        if not det.found.any():
-            raise InputError(f"{src}: no person detected in any of the {len(frames)} frames")
+    with reusable_work(work):
+        det, reused = detect_person(src, frames, work, progress, timings)
         K = intrinsics(frames.shape[2], frames.shape[1], cfg.focal)
         pose, phenotype, info = fit_detections(det, det.masks, K, cfg, work, anny, progress, timings)
-    except (GmaError, ValueError) as exc:
-        if not existed and (not any(work.rglob("*.npz")) or "no person detected" in str(exc)):
-            shutil.rmtree(work, ignore_errors=True)
-            raise
-        raise type(exc)(f"{exc} (the detections and fits done so far are kept in {work}; the next run reuses "
-                        "them, delete it to start over)") from None
     body = anny if anny is not None else load_body("anny")
     shape = torch.from_numpy(np.asarray(phenotype, np.float32))
     if feet not in ("frame", "clip"):

@@ -10,12 +10,14 @@ with ``--force`` to rewrite OUT — reuses them. Delete ``OUT.work/`` to start o
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
 import os
 import shutil
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -106,12 +108,20 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
     timings["decode"] = time.perf_counter() - t0
     work = work_dir(out)
-    existed = work.exists()
-    try:
+    with reusable_work(work):
         return _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress,
                          anny, timings)
+
+
+@contextlib.contextmanager
+def reusable_work(work: Path) -> Iterator[Path]:
+    """Around work that fills ``work`` (``OUT.work``): on a failure, a folder this run created is kept only
+    when it holds what a next run reuses (detections, a body fit), and the error says so; otherwise it is
+    removed, so a failed import leaves nothing behind."""
+    existed = work.exists()
+    try:
+        yield work
     except (GmaError, ValueError) as exc:
-        # Keep OUT.work only when it holds work a next run reuses (detections, a body fit), and say so.
         if not existed and (not any(work.rglob("*.npz")) or "no person detected" in str(exc)):
             shutil.rmtree(work, ignore_errors=True)
             raise
@@ -119,14 +129,21 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
                         "them, delete it to start over)") from None
 
 
-def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress, anny,
-              timings):
-    T, H, W = frames.shape[:3]
+def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, timings: dict):
+    """MediaPipe detections of ``frames`` [T, H, W, 3] (cached in ``work/detect``): (detections, frames
+    reused from the cache). No person in any frame is an :class:`InputError` naming ``src``."""
     t0 = time.perf_counter()
     det, reused = detect_frames(frames, work / "detect", progress=progress)
     timings["detect"] = time.perf_counter() - t0
     if not det.found.any():
-        raise InputError(f"{src}: no person detected in any of the {T} frames")
+        raise InputError(f"{src}: no person detected in any of the {len(frames)} frames")
+    return det, reused
+
+
+def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress, anny,
+              timings):
+    T, H, W = frames.shape[:3]
+    det, reused = detect_person(src, frames, work, progress, timings)
     if mask_dir is not None:
         total = n_src if n_src is not None else _count(src)
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
