@@ -49,6 +49,21 @@ class Camera:
         K = np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]])
         return Camera(view.astype(np.float32), K.astype(np.float32), int(width), int(height))
 
+    @property
+    def eye(self) -> np.ndarray:
+        """[3] camera centre in world coordinates (float64)."""
+        R, t = self.viewmat[:3, :3].astype(np.float64), self.viewmat[:3, 3].astype(np.float64)
+        return -R.T @ t
+
+    def project(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """World points [N, 3] -> (pixels [N, 2], camera depth z [N]), in float64. Points at z = 0 give
+        inf/nan pixels, without a warning."""
+        R, t = self.viewmat[:3, :3].astype(np.float64), self.viewmat[:3, 3].astype(np.float64)
+        pc = np.asarray(points, np.float64) @ R.T + t
+        uvw = pc @ self.K.astype(np.float64).T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return uvw[:, :2] / uvw[:, 2:3], pc[:, 2]
+
     def to_json(self) -> dict:
         return {"width": self.width, "height": self.height, "K": self.K.tolist(), "w2c": self.viewmat.tolist()}
 

@@ -29,15 +29,9 @@ def face_centres_on_screen(vertices: np.ndarray, faces: np.ndarray, camera: Came
     f = np.asarray(faces, np.int64)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     centre = (a + b + c) / 3
-    R, t = camera.viewmat[:3, :3].astype(np.float64), camera.viewmat[:3, 3].astype(np.float64)
-    pc = centre @ R.T + t
-    z = pc[:, 2]
-    uvw = pc @ camera.K.astype(np.float64).T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        px = uvw[:, :2] / uvw[:, 2:3]
-    eye = -R.T @ t
+    px, z = camera.project(centre)
     normal = np.cross(b - a, c - a)
-    facing = np.einsum("fc,fc->f", normal, eye - centre) > 0
+    facing = np.einsum("fc,fc->f", normal, camera.eye - centre) > 0
     return px, z, facing
 
 

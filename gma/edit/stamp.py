@@ -151,13 +151,7 @@ def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.T
     Returns (colors [N, 3], weights [N] in [0, 1], visible [N] bool).
     """
     cam = view.camera
-    p = means.detach().double().numpy()
-    R, t = cam.viewmat[:3, :3].astype(np.float64), cam.viewmat[:3, 3].astype(np.float64)
-    pc = p @ R.T + t
-    z = pc[:, 2]
-    uvw = pc @ cam.K.astype(np.float64).T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        px = uvw[:, :2] / uvw[:, 2:3]
+    px, z = cam.project(means.detach().double().numpy())
     h, w = view.ids.ids.shape
     ix = np.floor(np.nan_to_num(px[:, 0], nan=-1.0)).astype(np.int64)
     iy = np.floor(np.nan_to_num(px[:, 1], nan=-1.0)).astype(np.int64)
@@ -167,10 +161,10 @@ def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.T
     # (the inside of the lips, an armpit).
     tri = view.vertices[view.faces].astype(np.float64)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    to_eye = (-R.T @ t) - tri.mean(1)
+    to_eye = cam.eye - tri.mean(1)
     cos = (normal * to_eye).sum(1) / np.maximum(np.linalg.norm(normal, axis=1) * np.linalg.norm(to_eye, axis=1), 1e-20)
     facing = (cos > -0.1)[face_of_surfel.numpy()]
-    visible = np.zeros(len(p), bool)
+    visible = np.zeros(len(z), bool)
     sel = np.nonzero(inside & facing)[0]
     visible[sel] = z[sel] <= view.ids.depth[iy[sel], ix[sel]] + tolerance
     sel = np.nonzero(inside)[0]
@@ -183,7 +177,7 @@ def stamp_targets(view: ScreenView, means: torch.Tensor, face_of_surfel: torch.T
     # Screen y points down: a counter-clockwise rotation on screen is clockwise in these coordinates.
     u = (math.cos(a) * dx - math.sin(a) * dy) * scale + iw / 2
     v = (math.sin(a) * dx + math.cos(a) * dy) * scale + ih / 2
-    rgba = np.zeros((len(p), 4), np.float32)
+    rgba = np.zeros((len(z), 4), np.float32)
     rgba[sel] = _bilinear(image, u[sel], v[sel])
     weight = rgba[:, 3] * visible
     if surfel_weight is not None:
