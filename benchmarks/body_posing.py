@@ -55,7 +55,6 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=30, help="frames timed per path")
     ap.add_argument("--cold", action="store_true", help="also time creation with an empty anny cache")
     args = ap.parse_args()
-    os.environ.setdefault("XDG_RUNTIME_DIR", tempfile.mkdtemp(prefix="gma-xdg-"))
     cache = os.environ.get("ANNY_CACHE_DIR", str(DEFAULT_ANNY_CACHE_DIR))
 
     if args.cold:

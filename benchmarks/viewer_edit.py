@@ -14,7 +14,6 @@ gma.edit, row upload, frame). The avatar is a fresh one (``Avatar.create``), the
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import tempfile
@@ -45,7 +44,6 @@ def main() -> None:
     ap.add_argument("--stroke-frames", type=int, default=30)
     ap.add_argument("--motion", default=None, help="play this motion while painting (e.g. walk)")
     args = ap.parse_args()
-    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display()
     try:
         with tempfile.TemporaryDirectory(prefix="gma-bench-edit-") as tmp:

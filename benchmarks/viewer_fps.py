@@ -8,7 +8,6 @@ queries (sampled every ``--sample-every`` frames; sampling is a sync point, so i
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -72,7 +71,6 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--sample-every", type=int, default=5)
     args = ap.parse_args()
-    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display("1280x1024x24")
     try:
         from gma.core.args import parse_image_size

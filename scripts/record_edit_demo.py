@@ -12,7 +12,6 @@ another shirt.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -68,7 +67,6 @@ def main() -> None:
     ap.add_argument("--fine-per-face", type=int, default=2)
     ap.add_argument("--fps", type=float, default=8.0)
     args = ap.parse_args()
-    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     xvfb = ensure_display("1024x768x24")
     try:
         with tempfile.TemporaryDirectory(prefix="gma-edit-demo-") as tmp:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from gma.core.args import non_negative_int, parse_image_size, positive_int
@@ -29,7 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    os.environ.setdefault("XDG_RUNTIME_DIR", "/tmp")
     import torch
 
     from gma.gpu import get_context
