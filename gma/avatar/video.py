@@ -11,7 +11,7 @@ from gma.data.cameras import look_at
 from gma.render import Camera
 from gma.render.image_io import to_uint8
 
-__all__ = ["orbit_cameras", "write_video"]
+__all__ = ["orbit_cameras", "render_turntable", "sequence_camera", "write_video"]
 
 
 def orbit_cameras(w2c: np.ndarray, K: np.ndarray, width: int, height: int, frames: int, up=(0.0, 0.0, 1.0),
@@ -31,6 +31,22 @@ def orbit_cameras(w2c: np.ndarray, K: np.ndarray, width: int, height: int, frame
         view = look_at(target + rot, target, up=up).astype(np.float32)
         out.append(Camera(view, np.asarray(K, np.float32), width, height))
     return out
+
+
+def sequence_camera(seq, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(K [3, 3] scaled so the longer image side is ``size``, w2c [4, 4]) of the first training frame of
+    ``seq``: where turntables and animation videos start, as the person was filmed."""
+    K, w2c = seq.cameras.frame(seq.split("train")[0])
+    K = np.array(K, np.float32)
+    K[:2] *= size / max(seq.width, seq.height)
+    return K, np.asarray(w2c)
+
+
+def render_turntable(renderer, params: dict, K: np.ndarray, w2c: np.ndarray, size: int, frames: int,
+                     background=(1.0, 1.0, 1.0)) -> list[np.ndarray]:
+    """``frames`` float [size, size, 3] renders of ``renderer`` (an ``AvatarRenderer``) posed by ``params``
+    from the cameras of :func:`orbit_cameras` (a full turn starting at ``w2c``)."""
+    return [renderer.render(params, cam, background) for cam in orbit_cameras(w2c, K, size, size, frames)]
 
 
 def write_video(path: str | Path, frames: list[np.ndarray], fps: float = 24.0) -> Path:

@@ -14,12 +14,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from safetensors import safe_open
 
 from gma.avatar import Avatar
 from gma.avatar.gpu import AvatarRenderer
-from gma.avatar.video import orbit_cameras, write_video
+from gma.avatar.video import render_turntable, sequence_camera, write_video
 from gma.batch.config import BatchConfig, Person
 from gma.body import load_body
 from gma.core.atomic import atomic_write_bytes
@@ -148,12 +147,9 @@ def video_step(job: PersonJob) -> dict:
     avatar, seq = _avatar(job), job.sequence()
     body, ctx, size = worker_body(avatar.body_name), worker_context(), job.batch.video_size
     renderer = AvatarRenderer(ctx, avatar, body)
-    K, w2c = seq.cameras.frame(seq.split("train")[0])
-    K = np.array(K, np.float32)
-    K[:2] *= size / max(seq.width, seq.height)
+    K, w2c = sequence_camera(seq, size)
     canon, bg = body.canonical_params(avatar.shape), (job.fit.background,) * 3
-    frames = [renderer.render(canon, cam, bg)
-              for cam in orbit_cameras(np.asarray(w2c), K, size, size, job.batch.video_frames)]
+    frames = render_turntable(renderer, canon, K, w2c, size, job.batch.video_frames, bg)
     path = write_video(job.folder / "turntable.mp4", frames)
     return {"file": path.name, "frames": len(frames)}
 

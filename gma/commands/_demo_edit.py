@@ -13,7 +13,7 @@ import numpy as np
 
 from gma.avatar import Avatar
 from gma.avatar.gpu import AvatarRenderer
-from gma.avatar.video import orbit_cameras, write_video
+from gma.avatar.video import render_turntable, write_video
 from gma.data import read_sequence
 from gma.edit import Editor
 from gma.edit.showcase import run_showcase
@@ -68,8 +68,7 @@ def edit_stage(out: Path, avatar_path: Path, preset_name: str, seed: int, body, 
 
     t0 = time.perf_counter()
     K, w2c = cameras
-    canon = body.canonical_params(avatar.shape)
-    frames = [renderer.render(canon, cam, bg) for cam in orbit_cameras(np.asarray(w2c), K, size, size, 72)]
+    frames = render_turntable(renderer, body.canonical_params(avatar.shape), K, w2c, size, 72, bg)
     video = write_video(out / "edited_turntable.mp4", frames)
     times["edited_video_s"] = time.perf_counter() - t0
     return {"times_s": times, "edits": edits, "files": [str(edited_path), str(video), *pictures]}

@@ -28,11 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
 
     from gma.avatar.gpu import AvatarRenderer
     from gma.avatar.posing import frame_params
-    from gma.avatar.video import orbit_cameras, write_video
+    from gma.avatar.video import orbit_cameras, render_turntable, sequence_camera, write_video
     from gma.body import load_body, motion
     from gma.commands._demo_edit import edit_stage
     from gma.core.atomic import atomic_write_json
@@ -78,15 +77,12 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     size = args.video_size or (256 if args.preset == "quick" else 512)
     renderer = AvatarRenderer(ctx, avatar, body)
-    K, w2c = seq.cameras.frame(seq.split("train")[0])
-    K = np.array(K, np.float32)
-    K[:2] *= size / max(seq.width, seq.height)
+    K, w2c = sequence_camera(seq, size)
     bg = (cfg.background,) * 3
     canon = body.canonical_params(avatar.shape)
-    turn = [renderer.render(canon, cam, bg) for cam in orbit_cameras(np.asarray(w2c), K, size, size, 72)]
-    turntable = write_video(out / "turntable.mp4", turn)
+    turntable = write_video(out / "turntable.mp4", render_turntable(renderer, canon, K, w2c, size, 72, bg))
     mot = motion(args.motion, frames=72, body=body, shape=avatar.shape)
-    cam = orbit_cameras(np.asarray(w2c), K, size, size, 1)[0]
+    cam = orbit_cameras(w2c, K, size, size, 1)[0]
     anim = [renderer.render(mot.params(i), cam, bg) for i in range(len(mot))]
     animation = write_video(out / f"novel_pose_{args.motion}.mp4", anim)
     # A test_pose frame as a still, for the summary.
