@@ -104,7 +104,7 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
         trainer = Trainer(fit, seqs if len(seqs) > 1 else seqs[0], target, body=worker_body(fit.avatar.body),
                           ctx=worker_context(), progress=False)
         trainer.run(resume=True)
-        avatars = {name: str(p) for name, p in zip(names, subject_outputs(target, seqs), strict=True)}
+        avatars = {name: str(p) for name, p in zip(names, subject_outputs(target, [s.root for s in seqs]), strict=True)}
         status.data.update(avatars=avatars, decoders=str(decoders))
         status.set_step("fit", "done", time.perf_counter() - t0, people=len(jobs))
     except Exception as exc:

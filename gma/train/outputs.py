@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from types import SimpleNamespace
 
 from gma.core.errors import InputError, OutputExistsError
 from gma.core.outputs import prepare_output_file
@@ -23,8 +22,7 @@ def prepare_fit_outputs(out: str | Path, seqs: list, resume: bool = False, force
     out = Path(out)
     if len(seqs) == 1 and out.suffix.lower() != ".gma":
         raise InputError(f"{out}: the avatar file must end in .gma")
-    # Sequence folders or Sequence objects: only their roots name the avatars (so this runs before reading).
-    avatars = subject_outputs(out, [SimpleNamespace(root=Path(getattr(s, "root", s))) for s in seqs])
+    avatars = subject_outputs(out, [getattr(s, "root", s) for s in seqs])  # Sequence objects or folders
     checkpoint = work_dir(out) / CHECKPOINT_NAME
     interrupted = checkpoint.is_file()
     if interrupted and not (resume or force):

@@ -86,15 +86,16 @@ class Subject:
     poses: PoseCorrections | None = None  # learnt pose corrections (sequences with estimated poses)
 
 
-def subject_outputs(out: Path, seqs: list) -> list[Path]:
-    """Avatar files of a fit: ``out`` itself for one sequence; ``out/<sequence folder name>.gma`` for
-    several (then ``out`` is a folder, which also receives ``decoders.gma``)."""
-    if len(seqs) == 1:
+def subject_outputs(out: Path, roots: list) -> list[Path]:
+    """Avatar files of a fit of the sequences in folders ``roots``: ``out`` itself for one sequence;
+    ``out/<sequence folder name>.gma`` for several (then ``out`` is a folder, which also receives
+    ``decoders.gma``). Only the folder names count, so outputs are known before any sequence is read."""
+    if len(roots) == 1:
         return [out]
     if out.suffix == ".gma":
         raise ValueError(f"{out}: with several sequences, -o names a folder (one avatar per sequence and the "
                          "shared decoders.gma go there)")
-    names = [Path(s.root).name or f"seq{i}" for i, s in enumerate(seqs)]
+    names = [Path(r).name or f"seq{i}" for i, r in enumerate(roots)]
     seen: dict[str, int] = {}
     outs = []
     for name in names:
@@ -124,7 +125,7 @@ class Trainer:
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         self.subjects: list[Subject] = []
-        for i, (s, o) in enumerate(zip(seqs, subject_outputs(self.out, seqs), strict=True)):
+        for i, (s, o) in enumerate(zip(seqs, subject_outputs(self.out, [s.root for s in seqs]), strict=True)):
             frames = load_frames(s, self.body, "train", cfg.resolution, cfg.max_frames)
             torch.manual_seed(cfg.seed + i)
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
