@@ -1,124 +1,142 @@
-"""Viewer frame rate while animating: the body with N placeholder surfels playing a built-in motion in a
-real window (Xvfb is started when there is no DISPLAY), with the per-pass GPU breakdown from timestamp
-queries (sampled every ``--sample-every`` frames; sampling is a sync point, so it is kept rare).
+"""Viewer frame rates in a real window (Xvfb is started when there is no DISPLAY), as a user meets them
+(issue 15): for each source, frames per second
 
-    python benchmarks/viewer_fps.py --size 800x600 --surfels 200000 --frames 40
+- ``full``: every frame at full quality while a motion plays (the viewer before adaptive quality);
+- ``orbit``: the camera turning a little every frame, motion paused, adaptive quality;
+- ``play``: a built-in motion playing, adaptive quality;
+- ``still``: the view settled: the one full frame it draws, then the rate of frames that show it again;
+
+with the quality levels the governor chose, and whether the settled frame is byte-identical to an
+offscreen full-quality render of the same view. Sources: an avatar of the full preset's size (k = 32,
+N_k = 4: 109,680 surfels; a fresh, unfitted one) and the body with N placeholder surfels.
+
+    python benchmarks/viewer_fps.py [--size 800x600] [--surfels 200000] [--frames 30]
 """
 
 from __future__ import annotations
 
 import argparse
+import collections
+import statistics
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import machine  # noqa: E402
+
 from viewer.display import ensure_display  # noqa: E402
 
 
-def synced_breakdown(ctx, state, w: int, h: int, frames: int = 3) -> dict[str, float]:
-    """Mean wall-clock ms of posing, projection + depth sort, binning + tile sort + rasterization, and the
-    overlay/blit pass, each submitted separately and waited for (a benchmark-only sync per stage)."""
-    import numpy as np
-    import wgpu
+def wait_gpu(ctx, probe) -> None:
+    ctx.read(probe, "u4", 1)
 
-    r, scene, src = state.renderer, state.scene, state.source
-    rast = r.rasterizer
-    cam = state.camera(w, h)
-    target = ctx.device.create_texture(size=(w, h, 1), format="rgba8unorm",
-                                       usage=wgpu.TextureUsage.RENDER_ATTACHMENT)
-    probe = ctx.buffer(4, "probe")
 
-    def wait():
-        ctx.read(probe, np.uint32, 1)
-
-    out = {"pose": 0.0, "project+depth sort": 0.0, "bin+sort+raster": 0.0, "blit+overlays": 0.0}
+def run_frames(win, frames: int, step=None) -> tuple[float, collections.Counter]:
+    """FPS over ``frames`` frames (GPU work waited for at the end), calling ``step()`` before each, and the
+    quality labels drawn."""
+    labels: collections.Counter = collections.Counter()
+    ctx = win.ctx
+    probe = ctx.buffer(4, "bench.probe")
+    wait_gpu(ctx, probe)
+    t0 = time.perf_counter()
     for _ in range(frames):
-        state.controls.scrub(state.controls.frame + 1)
-        t0 = time.perf_counter()
-        enc = ctx.device.create_command_encoder()
-        src.encode_update(enc)
-        ctx.submit(enc)
-        wait()
-        t1 = time.perf_counter()
-        enc = ctx.device.create_command_encoder()
-        cap = rast.isect_capacity_hint
-        st = rast.project(enc, src.surfels, cam, cap)
-        ctx.submit(enc)
-        wait()
-        t2 = time.perf_counter()
-        enc = ctx.device.create_command_encoder()
-        rast.bin_and_rasterize(enc, src.surfels, cam, st, cap, r._background, r._image_view)
-        ctx.submit(enc)
-        wait()
-        t3 = time.perf_counter()
-        scene.options.surfels = False  # the pass below: blit stand-in (clear) + overlays, no surfel render
-        r.draw(scene, cam, target.create_view(), "rgba8unorm")
-        scene.options.surfels = True
-        wait()
-        t4 = time.perf_counter()
-        for k, a, b in (("pose", t0, t1), ("project+depth sort", t1, t2), ("bin+sort+raster", t2, t3),
-                        ("blit+overlays", t3, t4)):
-            out[k] += (b - a) * 1e3 / frames
+        if step:
+            step()
+        win.draw_frame()
+        labels["reused" if win.last_quality is None else win.last_quality.label()] += 1
+    wait_gpu(ctx, probe)
+    return frames / (time.perf_counter() - t0), labels
+
+
+def measure(name: str, state, w: int, h: int, frames: int, motion: str) -> dict:
+    import numpy as np
+
+    from viewer.window import ViewerWindow
+
+    out: dict = {"source": name, "surfels": state.source.surfels.count}
+    ctl = state.controls
+    # 1. Full quality every frame, playing (what the viewer did before).
+    win = ViewerWindow(state, w, h, panels=False, adaptive=False)
+    state.play_motion(motion)
+    run_frames(win, 3)
+    state.renderer.rasterizer.grow_capacity(state.renderer.last_state)
+    out["full"], _ = run_frames(win, frames)
+    win.close()
+
+    win = ViewerWindow(state, w, h, panels=False)
+    # 2. Orbit, paused: the governor settles within a few frames (warm-up), then the measured run.
+    ctl.playing = False
+    run_frames(win, 8, lambda: state.orbit_by(6.0, 0.0))
+    out["orbit"], out["orbit_levels"] = run_frames(win, frames, lambda: state.orbit_by(6.0, 0.0))
+    # 3. Playing.
+    ctl.playing = True
+    run_frames(win, 8)
+    out["play"], out["play_levels"] = run_frames(win, frames)
+    # 4. Settled: the full frame, then frames that show it again.
+    ctl.playing = False
+    t0 = time.perf_counter()
+    win.draw_frame()
+    win.draw_frame()  # the first settled frame refines; this one is drawn full if the first was not
+    probe = state.ctx.buffer(4, "bench.probe")
+    wait_gpu(state.ctx, probe)
+    out["settle_ms"] = (time.perf_counter() - t0) * 1e3
+    out["still"], out["still_levels"] = run_frames(win, frames)
+    shot = win.screenshot()[..., :3]
+    ref = state.renderer.render_image(state.scene, state.camera(w, h))[..., :3]
+    out["still_identical"] = bool(np.array_equal(shot, ref))
+    out["still_max_diff"] = int(np.abs(shot.astype(int) - ref.astype(int)).max())
+    win.close()
     return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--size", default="800x600")
-    ap.add_argument("--surfels", type=int, default=200_000)
+    ap.add_argument("--surfels", type=int, default=200_000, help="placeholder surfels of the body source")
+    ap.add_argument("--fine-per-face", type=int, default=4, help="N_k of the avatar source (4: full preset)")
     ap.add_argument("--motion", default="walk")
-    ap.add_argument("--frames", type=int, default=20)
-    ap.add_argument("--sample-every", type=int, default=5)
+    ap.add_argument("--frames", type=int, default=30)
     args = ap.parse_args()
     xvfb = ensure_display("1280x1024x24")
     try:
+        import torch
+
+        from gma.avatar import Avatar
+        from gma.avatar.config import AvatarConfig
+        from gma.body import load_body
         from gma.core.args import parse_image_size
         from gma.gpu import get_context
         from gma.view import BodySource
-        from gma.view.timing import FrameStats
+        from gma.view.source import avatar_source
         from viewer.state import ViewerState
-        from viewer.window import ViewerWindow
 
+        torch.set_num_threads(1)  # as the viewer does (viewer/app.py)
         w, h = parse_image_size(args.size)
         ctx = get_context()
-        from gma.body import load_body
-
-        source = BodySource.placeholder(ctx, load_body("anny"), args.surfels)
-        state = ViewerState(ctx, source)
-        state.play_motion(args.motion)
-        win = ViewerWindow(state, w, h, panels=False)
-        win.stats = FrameStats(ctx, every=args.sample_every, window=args.frames)
-        for _ in range(5):  # warm-up: pipelines, capacity growth
-            win.draw_frame()
-        state.renderer.rasterizer.grow_capacity(state.renderer.last_state)
-        samples: list[dict] = []
-        t0 = time.perf_counter()
-        frames_played = state.controls.frame
-        for _ in range(args.frames):
-            win.draw_frame()
-            if win.stats.gpu_ms and win.stats.frame % args.sample_every == 1:
-                samples.append(dict(win.stats.gpu_ms))
-        ctx.read(state.renderer.last_state.stats, "u4", 1)  # wait for the last frame
-        elapsed = time.perf_counter() - t0
-        synced = synced_breakdown(ctx, state, w, h, frames=3)
-        win.close()
-        print(f"device: {ctx.name}")
-        print(f"{args.surfels} surfels, {w}x{h}, motion {args.motion!r} playing "
-              f"(frame {frames_played} -> {state.controls.frame}), {args.frames} frames")
-        print(f"FPS {args.frames / elapsed:.2f} ({1e3 * elapsed / args.frames:.1f} ms/frame, wall clock, "
-              f"incl. {len(samples)} timestamp-sampled frames)")
-        if samples:
-            keys = list(samples[0])
-            print("GPU ms per pass (mean over sampled frames):")
-            for k in keys:
-                vals = [s.get(k, 0.0) for s in samples]
-                print(f"  {k:>10s} {sum(vals) / len(vals):8.2f}")
-            print(f"  {'total':>10s} {sum(sum(s.values()) for s in samples) / len(samples):8.2f}")
-        print("wall-clock ms per stage, each submitted alone and waited for (reliable where timestamps are not,")
-        print("e.g. lavapipe, whose timestamps do not wait for the compute work):")
-        for k, v in synced.items():
-            print(f"  {k:>18s} {v:8.1f}")
+        body = load_body("anny")
+        print(f"device: {ctx.name}; {machine()}; {w}x{h}, {args.frames} frames per run")
+        rows = []
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "avatar.gma"
+            Avatar.create(AvatarConfig(fine_per_face=args.fine_per_face), body).save(path)
+            rows.append(measure("avatar", ViewerState(ctx, avatar_source(ctx, path)), w, h, args.frames,
+                                args.motion))
+        rows.append(measure("body", ViewerState(ctx, BodySource.placeholder(ctx, body, args.surfels)), w, h,
+                            args.frames, args.motion))
+        print(f"{'source':<8} {'surfels':>8} {'full FPS':>9} {'orbit FPS':>10} {'play FPS':>9} {'settle ms':>10} "
+              f"{'still FPS':>10} identical")
+        for r in rows:
+            print(f"{r['source']:<8} {r['surfels']:>8} {r['full']:9.2f} {r['orbit']:10.2f} {r['play']:9.2f} "
+                  f"{r['settle_ms']:10.0f} {r['still']:10.1f} {r['still_identical']} (max diff {r['still_max_diff']})")
+        for r in rows:
+            for k in ("orbit_levels", "play_levels", "still_levels"):
+                levels = ", ".join(f"{lab} x{n}" for lab, n in r[k].most_common())
+                print(f"  {r['source']} {k.split('_')[0]}: {levels}")
+        print(f"load after: {machine()}; median of orbit/play FPS: "
+              f"{statistics.median([r[k] for r in rows for k in ('orbit', 'play')]):.2f}")
     finally:
         if xvfb is not None:
             xvfb.terminate()

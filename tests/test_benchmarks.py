@@ -23,7 +23,7 @@ SMOKE: dict[str, list[str] | str] = {
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
     "body_posing.py": ["--per-face", "1", "--frames", "2"],
     "synth.py": ["--size", "48"],
-    "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--sample-every", "2"],
+    "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--fine-per-face", "1"],
     "avatar_decode.py": ["--size", "64"],
     "fit_presets.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
     "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],

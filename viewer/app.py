@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from gma.core.args import non_negative_int, parse_image_size, positive_int
+from gma.core.args import non_negative_int, parse_image_size, positive_float, positive_int
 from gma.core.outputs import prepare_output_file
 from gma.core.report import run_reporting_errors
 
@@ -20,6 +20,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--motion", default=None, help="built-in motion (turn, walk, wave, expressions) or body.npz")
     p.add_argument("--sequence", default=None, help="sequence folder: its cameras become presets, its poses a motion")
     p.add_argument("--no-panels", action="store_true", help="no Dear ImGui panels (mouse and keys only)")
+    p.add_argument("--target-fps", type=positive_float, default=12.0,
+                   help="while the view moves, draw cheaper frames (fewer surfels, smaller image) to keep this rate; "
+                        "a settled view is always drawn at full quality")
+    p.add_argument("--full-quality", action="store_true", help="draw every frame at full quality, however slow")
     p.add_argument("--frames", type=non_negative_int, default=0,
                    help="draw this many frames and exit (0: until closed)")
     p.add_argument("--screenshot", default=None, help="with --frames: save the last frame as PNG")
@@ -50,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     motion = args.motion or (args.sequence if args.sequence and state.controls is not None else None)
     if motion:
         state.play_motion(motion)
-    window = ViewerWindow(state, width, height, panels=not args.no_panels)
+    window = ViewerWindow(state, width, height, panels=not args.no_panels, target_fps=args.target_fps,
+                          adaptive=not args.full_quality)
     if args.frames <= 0:
         window.run()
         return 0

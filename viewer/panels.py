@@ -97,6 +97,8 @@ class Panels:
         imgui.begin("stats", None, flags)
         st = self.window.stats
         imgui.text(f"{st.fps:.1f} FPS  {st.frame_ms:.1f} ms")
+        q = self.window.last_quality
+        imgui.text("still (full frame shown again)" if q is None else f"frame: {q.label()}")
         for name, ms in st.gpu_ms.items():
             imgui.text(f"{name:>10s} {ms:6.2f} ms")
         if not st.gpu_ms:

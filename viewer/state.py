@@ -54,9 +54,7 @@ class ViewerState:
     def camera(self, width: int, height: int) -> Camera:
         """The current view for a ``width`` x ``height`` image (a preset is rescaled to that size)."""
         if self.preset is not None:
-            cam = self.presets[self.preset]
-            s = np.array([width / cam.width, height / cam.height, 1.0], np.float32)[:, None]
-            return Camera(cam.viewmat, (cam.K * s).astype(np.float32), width, height)
+            return self.presets[self.preset].resized(width, height)
         return self.orbit.camera(width, height)
 
     def orbit_by(self, dx: float, dy: float) -> None:

@@ -25,6 +25,7 @@ import wgpu
 from wgpu.utils.glfw_present_info import get_glfw_present_info
 
 from gma.core.errors import DeviceError
+from gma.view.quality import FULL, QualityGovernor
 from gma.view.renderer import read_texture
 from gma.view.timing import FrameStats
 from viewer.editing import report
@@ -39,10 +40,15 @@ _TOOL_KEYS = {glfw.KEY_N: "navigate", glfw.KEY_B: "box", glfw.KEY_L: "lasso", gl
 
 
 class ViewerWindow:
-    """One viewer window on ``state``. ``panels``: draw the Dear ImGui panels (when imgui-bundle exists)."""
+    """One viewer window on ``state``. ``panels``: draw the Dear ImGui panels (when imgui-bundle exists).
+
+    Frames while the view changes are drawn as cheaply as needed to keep ``target_fps``
+    (:class:`gma.view.quality.QualityGovernor`; ``adaptive=False`` keeps full quality); once the view
+    settles one full frame is drawn and then shown again, and the loop sleeps until the next event."""
 
     def __init__(self, state: ViewerState, width: int = 800, height: int = 600, title: str = "GMA viewer",
-                 panels: bool = True, vsync: bool = False, visible: bool = True):
+                 panels: bool = True, vsync: bool = False, visible: bool = True, target_fps: float = 12.0,
+                 adaptive: bool = True):
         self.state, self.ctx = state, state.ctx
         self.ctx.check_image_size(int(width), int(height), "window")  # before glfw/wgpu, which abort on it
         if not glfw.init():
@@ -62,6 +68,9 @@ class ViewerWindow:
         self._configured_size = (0, 0)
         self.tool = "navigate"
         self.stats = FrameStats(self.ctx)
+        self.quality = QualityGovernor(target_fps, adaptive)
+        self._view_key = None
+        self.last_quality = FULL  # what the last frame drew (None: it showed the previous full frame again)
         self.ui = None
         if panels:
             try:
@@ -301,6 +310,13 @@ class ViewerWindow:
         pts = np.asarray(d["points"] + [d["points"][0]], np.float32)
         return [pts]
 
+    @property
+    def idle(self) -> bool:
+        """The last frame showed the settled view again and nothing runs in the background: the loop can
+        wait for input instead of drawing."""
+        busy = self.edit is not None and (self.edit.busy or self.edit.stroke is not None)
+        return self.last_quality is None and not busy and self.state.recorder is None and self._drag is None
+
     def draw_frame(self) -> None:
         """Poll input, advance playback (or recording), draw and present one frame."""
         glfw.poll_events()
@@ -321,18 +337,26 @@ class ViewerWindow:
                                    usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC,
                                    alpha_mode="opaque")
             self._configured_size = (w, h)
+        camera = self.state.camera(w, h)
+        key = self.state.renderer.view_key(self.state.scene, camera)
+        changed, self._view_key = key != self._view_key, key
+        if self.state.recorder is not None or self._want_capture:
+            changed = False  # a capture shows the full frame (the renderer redraws it if the view changed)
+        quality = self.quality.next_frame(changed)
         texture = self.context.get_current_texture()
         view = texture.create_view()
         timer = self.stats.timer_for_frame()
         lines, images = self._overlays()
-        self.state.renderer.draw(self.state.scene, self.state.camera(w, h), view, self.format,
-                                 lines=lines, timer=timer, images=images)
+        self.state.renderer.draw(self.state.scene, camera, view, self.format, lines=lines, timer=timer,
+                                 images=images, quality=quality)
+        self.last_quality = quality
         if self.ui is not None and self.ui.visible:
             self.ui.draw(view, (w, h), dt)
         if self._want_capture:
             self._capture = read_texture(self.ctx, texture)
             self._want_capture = False
         self.context.present()
+        self.quality.frame_done((time.perf_counter() - now) * 1e3)
         self.stats.end_frame()
         self.update_title(self._stats_text)  # sets the title only when it changes (the dirty marker)
         if self.edit is not None:
@@ -352,9 +376,13 @@ class ViewerWindow:
         """The frame loop, until the window is closed."""
         try:
             while not self.should_close:
+                if self.idle:
+                    # Nothing to redraw: sleep until input arrives (a background solve is polled 20 times
+                    # a second), so an idle window leaves the cores to the edit solves and other work.
+                    glfw.wait_events_timeout(0.05)
                 self.draw_frame()
                 if self.stats.frame % 60 == 0:
-                    self._stats_text = self.stats.summary()
+                    self._stats_text = f"{self.stats.summary()} | {self.quality.quality.label()}"
         finally:
             self.close()
 

@@ -55,6 +55,14 @@ class Camera:
         R, t = self.viewmat[:3, :3].astype(np.float64), self.viewmat[:3, 3].astype(np.float64)
         return -R.T @ t
 
+    def resized(self, width: int, height: int) -> Camera:
+        """The same view on a ``width`` x ``height`` image: the intrinsics scale with the image, so that its
+        edges (and every point between them) map to the same rays."""
+        if (width, height) == (self.width, self.height):
+            return self
+        s = np.array([width / self.width, height / self.height, 1.0], np.float32)[:, None]
+        return Camera(self.viewmat, (self.K * s).astype(np.float32), int(width), int(height))
+
     def project(self, points) -> tuple[np.ndarray, np.ndarray]:
         """World points [N, 3] -> (pixels [N, 2], camera depth z [N]), in float64. Points at z = 0 give
         inf/nan pixels, without a warning."""

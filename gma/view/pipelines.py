@@ -51,6 +51,11 @@ class ViewerPipelines:
             {"binding": 0, "visibility": wgpu.ShaderStage.FRAGMENT,
              "texture": {"sample_type": wgpu.TextureSampleType.float}},
         ])
+        self.blit_scaled_layout = dev.create_bind_group_layout(entries=[
+            {"binding": 0, "visibility": wgpu.ShaderStage.FRAGMENT,
+             "texture": {"sample_type": wgpu.TextureSampleType.float}},
+            {"binding": 1, "visibility": wgpu.ShaderStage.FRAGMENT, "sampler": {"type": "filtering"}},
+        ])
         self.lines_layout = dev.create_bind_group_layout(entries=[
             {"binding": 0, "visibility": vis, "buffer": {"type": wgpu.BufferBindingType.uniform}},
         ])
@@ -74,9 +79,11 @@ class ViewerPipelines:
         target = {"format": fmt}
         topology = wgpu.PrimitiveTopology.triangle_list
         buffers: list = []
-        if kind == "blit":
+        if kind in ("blit", "blit_scaled"):
             module = shaders.module(dev, "viewer/blit.wgsl", {"SRGB_TARGET": fmt.endswith("-srgb")})
             layout, vs, fs = self.blit_layout, "vs_main", "fs_main"
+            if kind == "blit_scaled":
+                layout, fs = self.blit_scaled_layout, "fs_scaled"
         elif kind == "lines":
             module = shaders.module(dev, "viewer/screen_lines.wgsl")
             layout, vs, fs = self.lines_layout, "vs_main", "fs_main"

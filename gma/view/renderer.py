@@ -2,10 +2,13 @@
 texture, into an offscreen texture for ``gma render`` and for tests.
 
 A frame is three submissions and no readback:
-1. the source's posing (``GpuPoser`` skinning + surfel placement into the renderer's input buffers);
-2. the surfel renderer into an rgba8unorm storage image (``SurfelRasterizer.render_to_texture``);
-3. one render pass into the target: blit of that image, then the mesh overlays (depth pre-pass,
-   coarse surfels, wireframe, normals, selection highlight) and screen-space lines (box / lasso).
+1. the source's posing (``GpuPoser`` skinning + surfel placement into the renderer's input buffers),
+   and on cheaper frames the thinning of the surfels (:class:`gma.render.subset.SurfelSubset`);
+2. the surfel renderer into an rgba8unorm storage image (``SurfelRasterizer.render_to_texture``), at
+   the window's size or, on cheaper frames, smaller (:class:`gma.view.quality.FrameQuality`);
+3. one render pass into the target: blit of that image (stretched when smaller), then the mesh overlays
+   (depth pre-pass, coarse surfels, wireframe, normals, selection highlight) and screen-space lines.
+A frame whose view has not changed since the last full frame skips step 2 and shows that image again.
 ``SurfelRasterizer.grow_capacity`` (a 4-byte read) runs only every ``capacity_every`` frames.
 """
 
@@ -19,7 +22,9 @@ import wgpu
 from gma.core.camera import Camera
 from gma.gpu import GpuContext
 from gma.render.rasterizer import SurfelRasterizer
+from gma.render.subset import SurfelSubset, spread_order
 from gma.view.pipelines import DEPTH_FORMAT, ViewerPipelines, clip_matrix
+from gma.view.quality import FULL, FrameQuality
 from gma.view.source import SurfelSource
 
 __all__ = ["DrawOptions", "FrameRenderer", "Scene", "ScreenImage"]
@@ -86,6 +91,7 @@ class FrameRenderer:
     def __init__(self, ctx: GpuContext, capacity_every: int = 30):
         self.ctx = ctx
         self.rasterizer = SurfelRasterizer(ctx)
+        self.subset = SurfelSubset(ctx)
         self.pipelines = ViewerPipelines(ctx)
         self.capacity_every = capacity_every
         self.frames = 0
@@ -106,6 +112,9 @@ class FrameRenderer:
         self._images: dict = {}  # slot -> (key, texture, bind group, params buffer, vertex buffer)
         self._sampler = None
         self.last_state = None
+        self._drawn: tuple | None = None  # (view key, quality) of the surfel image in self._image
+        self.surfel_frames = 0  # frames that ran the surfel renderer (the others reused its image)
+        self._spread: tuple | None = None  # (source id, count, order) for the cheaper frames' surfels
 
     # -- resources ------------------------------------------------------------------------------------
     def _ensure_image(self, w: int, h: int) -> None:
@@ -117,7 +126,16 @@ class FrameRenderer:
             self._image_view = self._image.create_view()
             self._blit_bind = self.ctx.device.create_bind_group(
                 layout=self.pipelines.blit_layout, entries=[{"binding": 0, "resource": self._image_view}])
+            self._blit_scaled_bind = self.ctx.device.create_bind_group(
+                layout=self.pipelines.blit_scaled_layout,
+                entries=[{"binding": 0, "resource": self._image_view}, {"binding": 1, "resource": self._linear()}])
             self._image_size = (w, h)
+            self._drawn = None
+
+    def _linear(self):
+        if self._sampler is None:
+            self._sampler = self.ctx.device.create_sampler(mag_filter="linear", min_filter="linear")
+        return self._sampler
 
     def _ensure_depth(self, w: int, h: int) -> None:
         if self._depth_size != (w, h):
@@ -153,6 +171,15 @@ class FrameRenderer:
                 layout=self.pipelines.overlay_layout, entries=entries)
         return bind
 
+    def _spread_order(self, src) -> np.ndarray:
+        """The source's surfels, best spread first (:func:`gma.render.subset.spread_order`), made once."""
+        key = (id(src), src.surfels.count)
+        if self._spread is None or self._spread[:2] != key:
+            binding = getattr(src, "binding", None)
+            faces = None if binding is None else np.asarray(binding.face_id)
+            self._spread = (*key, spread_order(src.surfels.count, faces))
+        return self._spread[2]
+
     def _set_background(self, rgb) -> None:
         value = tuple(float(c) for c in rgb[:3])
         if value != self._background_value:
@@ -160,26 +187,46 @@ class FrameRenderer:
             self._background_value = value
 
     # -- drawing ---------------------------------------------------------------------------------------
+    @staticmethod
+    def view_key(scene: Scene, camera: Camera) -> tuple:
+        """Everything the surfel image depends on: equal keys give equal images."""
+        opts, src = scene.options, scene.source
+        return (id(src), src.version, camera.viewmat.tobytes(), camera.K.tobytes(), camera.width, camera.height,
+                tuple(opts.background), opts.surfels)
+
     def draw(self, scene: Scene, camera: Camera, target: wgpu.GPUTextureView, target_format: str,
-             lines: list[np.ndarray] | None = None, timer=None, images: list[ScreenImage] | None = None) -> None:
+             lines: list[np.ndarray] | None = None, timer=None, images: list[ScreenImage] | None = None,
+             quality: FrameQuality | None = FULL) -> None:
         """Draw ``scene`` seen by ``camera`` into ``target`` (a texture view of ``camera``'s size and
         ``target_format``). ``lines``: screen-space polylines [P, 2] in pixels; ``images``: quads drawn
         over everything (:class:`ScreenImage`); ``timer``: a :class:`gma.view.timing.FrameTimer` on
-        sampled frames."""
+        sampled frames. ``quality``: how to draw the surfels (:class:`FrameQuality`); None shows the
+        previous full frame's surfel image again when :meth:`view_key` is unchanged, and draws a full
+        frame otherwise. Overlays are drawn every frame."""
         ctx, opts, src = self.ctx, scene.options, scene.source
         w, h = camera.width, camera.height
+        key = self.view_key(scene, camera)
+        reuse = quality is None and self._drawn == (key, FULL) and self._image is not None
+        quality = quality or FULL
         enc = ctx.device.create_command_encoder(label="viewer.pose")
         if timer:
             timer.mark(enc, "pose.begin")
         src.encode_update(enc)
+        surfels = src.surfels
+        if opts.surfels and not reuse:
+            order = self._spread_order(src) if quality.stride > 1 else None
+            surfels = self.subset.encode(enc, src.surfels, quality.stride, order)
         if timer:
             timer.mark(enc, "pose.end")
         ctx.submit(enc)
         self._set_background(opts.background)
-        if opts.surfels:
-            self._ensure_image(w, h)
-            self.last_state = self.rasterizer.render_to_texture(src.surfels, camera, self._image_view,
-                                                                self._background, timer)
+        image_size = quality.image_size(w, h)
+        if opts.surfels and not reuse:
+            self._ensure_image(*image_size)
+            self.last_state = self.rasterizer.render_to_texture(surfels, camera.resized(*image_size),
+                                                                self._image_view, self._background, timer)
+            self._drawn = (key, quality)
+            self.surfel_frames += 1
             if self.frames % self.capacity_every == 0:
                 self.rasterizer.grow_capacity(self.last_state)
         self.frames += 1
@@ -193,8 +240,9 @@ class FrameRenderer:
             timestamp_writes=timer.writes("overlay") if timer else None,
         )
         if opts.surfels:
-            rp.set_pipeline(self.pipelines.get("blit", target_format))
-            rp.set_bind_group(0, self._blit_bind)
+            exact = self._image_size == (w, h)
+            rp.set_pipeline(self.pipelines.get("blit" if exact else "blit_scaled", target_format))
+            rp.set_bind_group(0, self._blit_bind if exact else self._blit_scaled_bind)
             rp.draw(3)
         mesh = src.mesh
         want_sel = opts.selection and len(scene.selection) > 0
@@ -264,15 +312,13 @@ class FrameRenderer:
                                      label="viewer.screen_image")
             dev.queue.write_texture({"texture": tex}, np.ascontiguousarray(data),
                                     {"bytes_per_row": 4 * iw, "rows_per_image": ih}, (iw, ih, 1))
-            if self._sampler is None:
-                self._sampler = dev.create_sampler(mag_filter="linear", min_filter="linear")
             params = entry[3] if entry else self.ctx.buffer(16, f"viewer.image{slot}", UNIFORM)
             vbuf = entry[4] if entry else self.ctx.buffer(96, f"viewer.image{slot}.vertices",
                                                           wgpu.BufferUsage.VERTEX | wgpu.BufferUsage.COPY_DST)
             bind = dev.create_bind_group(layout=self.pipelines.image_layout, entries=[
                 {"binding": 0, "resource": {"buffer": params, "offset": 0, "size": 16}},
                 {"binding": 1, "resource": tex.create_view()},
-                {"binding": 2, "resource": self._sampler}])
+                {"binding": 2, "resource": self._linear()}])
             entry = self._images[slot] = (img.key, tex, bind, params, vbuf)
         _, _, bind, params, vbuf = entry
         c = np.asarray(img.corners, np.float32).reshape(4, 2)

@@ -69,6 +69,10 @@ class SurfelSource(Protocol):
         """Record this frame's GPU work (posing) into ``encoder``; True when something was recorded."""
 
     @property
+    def version(self) -> object:
+        """A value that changes whenever the surfels to draw may have changed."""
+
+    @property
     def mesh(self) -> MeshLayer | None:
         """The posed mesh for overlays and selection, or None (a plain splat cloud)."""
 
@@ -96,6 +100,8 @@ class StaticSource:
 
     def encode_update(self, encoder) -> bool:
         return False
+
+    version = (0, 0)  # fixed surfels never change
 
 
 def placeholder_surfels(body, count: int, seed: int = 0):
@@ -139,6 +145,7 @@ class BodySource:
         self._neutral_rest: tuple[bytes, torch.Tensor] | None = None
         self._rest: torch.Tensor | None = None
         self.pose_version = 0  # bumped whenever the posed mesh may have changed (edit tools cache views on it)
+        self.color_version = 0  # bumped by colour-only writes (an edit's preview)
         self.set_params(self.params)
 
     @staticmethod
@@ -235,6 +242,12 @@ class BodySource:
         breaks = np.nonzero(np.diff(rows) != 1)[0] + 1
         for seg_rows, seg_cols in zip(np.split(rows, breaks), np.split(colors, breaks)):
             self.ctx.write(self.surfels.colors, np.ascontiguousarray(seg_cols), int(seg_rows[0]) * 12)
+        self.color_version += 1
+
+    @property
+    def version(self) -> tuple[int, int]:
+        """Changes whenever the surfels to draw may have changed (the viewer reuses a frame while it does not)."""
+        return self.pose_version, self.color_version
 
     def _rest_vertices(self, params: dict) -> torch.Tensor:
         shape, expr = params["shape"], params["expression"]
