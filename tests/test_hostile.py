@@ -246,6 +246,8 @@ CASES = [
          lambda t, s, a: ["body", "export-obj", str(t / "b.obj"), "--motion", "walk", "--frame", "200"], "--frame"),
     # gma view (no window is opened: every case fails before)
     Case("view --size 100000", lambda t, s, a: ["view", str(a), "--size", "100000"], "100000x100000"),
+    Case("view --target-fps nan", lambda t, s, a: ["view", str(a), "--target-fps", "nan"], "--target-fps",
+         argparse=True),
     Case("view without a display", lambda t, s, a: ["view", str(a), "--frames", "1"], "no display",
          env={"DISPLAY": None, "WAYLAND_DISPLAY": None}),
     # gma import
