@@ -11,7 +11,7 @@ from gma.core.camera import Camera
 from gma.gpu import GpuContext, get_context
 from gma.render.rasterizer import SurfelRasterizer, read_outputs
 from gma.render.surfels import SurfelBuffers
-from gma.render.validate import check_background, check_camera, check_surfels
+from gma.render.validate import check_background, check_camera, check_surfels, host_array
 
 
 @dataclass
@@ -35,48 +35,43 @@ def rasterizer_for(ctx: GpuContext) -> SurfelRasterizer:
     return r
 
 
-def _host(t: torch.Tensor) -> np.ndarray:
-    return t.detach().to("cpu", torch.float32).contiguous().numpy()
-
-
 class _RasterizeFunction(torch.autograd.Function):
     """Bridges torch autograd and the WGSL passes. Forward keeps exactly what backward needs (the
     typed :class:`ForwardState` and the uploaded surfels) on the GPU; backward uploads the upstream
-    image gradients, runs the two backward passes and reads back the surfel gradients."""
+    image gradients, runs the two backward passes and reads back the surfel gradients. Host-side work is
+    numpy (see :func:`gma.render.validate.host_array` for why not torch)."""
 
     @staticmethod
-    def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu):
+    def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host):
         fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
-        surfels = SurfelBuffers.from_arrays(gpu, _host(means), _host(quats), _host(scales), _host(opacities),
-                                            _host(colors))
-        camera = Camera(_host(viewmat), _host(K), width, height)
-        bg = None if background is None else _host(background)
+        surfels = SurfelBuffers.from_arrays(gpu, *host)  # host: float32 copies of the five surfel tensors
+        camera = Camera(host_array(viewmat), host_array(K), width, height)
+        bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
         state = rast.forward(surfels, camera, bg)
         out = read_outputs(gpu, state)
         fctx.state, fctx.surfels, fctx.rast = state, surfels, rast
         fctx.device = means.device
         fctx.has_background = background is not None
-        tensors = [torch.from_numpy(a).to(means.device) for a in (out.color, out.alpha, out.normal, out.depth)]
-        fctx.save_for_backward(tensors[1])
-        return tuple(tensors)
+        fctx.alpha = out.alpha  # [H, W, 1] numpy, for the background gradient
+        return tuple(torch.from_numpy(a).to(means.device) for a in (out.color, out.alpha, out.normal, out.depth))
 
     @staticmethod
     def backward(fctx, v_color, v_alpha, v_normal, v_depth):
         needs = fctx.needs_input_grad
         if not any(needs[:5]) and not needs[7]:
-            return (None,) * 11
-        (alpha,) = fctx.saved_tensors
-        grads = fctx.rast.backward(fctx.state, fctx.surfels, *(None if g is None else _host(g)
-                                                                for g in (v_color, v_alpha, v_normal, v_depth)))
+            return (None,) * 12
+        upstream = [None if g is None else host_array(g) for g in (v_color, v_alpha, v_normal, v_depth)]
+        grads = fctx.rast.backward(fctx.state, fctx.surfels, *upstream)
         dev = fctx.device
         result = [torch.from_numpy(g).to(dev) if need else None
                   for g, need in zip((grads.means, grads.quats, grads.scales, grads.opacities, grads.colors), needs)]
         v_background = None
         if needs[7] and fctx.has_background and v_color is not None:
             # colour = sum w c + (1 - alpha) background: d/d background = sum over pixels of v_color (1 - alpha).
-            v_background = (v_color * (1 - alpha)).sum(dim=(0, 1))
-        return (*result, None, None, v_background, None, None, None)
+            v_bg = (upstream[0] * (1 - fctx.alpha)).sum(axis=(0, 1), dtype=np.float64).astype(np.float32)
+            v_background = torch.from_numpy(v_bg).to(dev)
+        return (*result, None, None, v_background, None, None, None, None)
 
 
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int,
@@ -94,10 +89,10 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
         scales, opacities, colors or background requires grad, the outputs carry a ``grad_fn`` whose
         backward runs the WGSL backward passes (camera gradients are not computed).
     """
-    means, quats, scales, opacities, colors = check_surfels(means, quats, scales, opacities, colors)
+    (means, quats, scales, opacities, colors), host = check_surfels(means, quats, scales, opacities, colors)
     viewmat, K, width, height = check_camera(viewmat, K, width, height)
     background = check_background(background, colors.shape[1])
     gpu = ctx or get_context()
     outs = _RasterizeFunction.apply(means, quats, scales, opacities, colors, viewmat, K, background, width, height,
-                                    gpu)
+                                    gpu, host)
     return RenderOutput(*outs)

@@ -15,6 +15,24 @@
 @group(0) @binding(14) var<storage, read> pixel_bounds: array<vec4<f32>>;     // [N] lo.xy, hi.xy
 // Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
 var<workgroup> batch_blocks: array<u32, BATCH>;
+// Per subgroup (row sg_id * BATCH): the batch slots whose block mask meets the subgroup's blocks.
+var<workgroup> hit_slots: array<u32, BATCH * (256u / SG)>;
+
+// Write, in slot order, the slots among the first `m` staged ones that touch `blocks` and lie before
+// `limit` into hit_slots[row..]; returns their number (uniform over the subgroup).
+fn list_hits(m: u32, blocks: u32, limit: u32, row: u32, sg_lane: u32) -> u32 {
+    var count = 0u;
+    for (var j = 0u; j < m; j += SG) {
+        let slot = j + sg_lane;
+        let hit = slot < min(m, limit) && (batch_blocks[min(slot, m - 1u)] & blocks) != 0u;
+        let hits = subgroupBallot(hit).x;
+        if hit {
+            hit_slots[row + count + countOneBits(hits & ((1u << sg_lane) - 1u))] = slot;
+        }
+        count += countOneBits(hits);
+    }
+    return count;
+}
 #endif
 
 var<workgroup> batch_surf: array<ProjectedSurfel, BATCH>;
@@ -116,7 +134,7 @@ fn stage_surfel(slot: u32, sid: u32, tile: u32) {
     }
 }
 
-fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32) -> PixelResult {
+fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32, sg_id: u32) -> PixelResult {
     var result: PixelResult;
     var T = 1.0;
     var done = !inside;
@@ -152,25 +170,23 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         var acc_nd = vec4<f32>(0.0);
         var last = 0u;
         // The subgroup's pixels form 4x2 blocks (see tile_pixel); a surfel whose screen bounds miss
-        // them is skipped by the whole subgroup at once.
+        // them is skipped by the whole subgroup at once. First the staged surfels that can touch this
+        // subgroup's blocks go, in order, into its row of hit_slots; only then is surfel data read, SG
+        // hits at a time. Lavapipe runs every branch body (masked) and every loop body at least once, so
+        // reading SG staged surfels per step, hit or not, paid the reads and one blend for each of ~4x
+        // as many steps (standard scene, 100k surfels: forward pass -5 %, backward pass -20 %).
         let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
-        for (var j = 0u; j < m; j += SG) {
+        let row = sg_id * BATCH;
+        let num_hits = list_hits(m, my_blocks, m, row, sg_lane);
+        for (var h = 0u; h < num_hits; h += SG) {
             if subgroupAll(done) {
                 break;
             }
-            // Which of the next SG surfels can touch this subgroup's pixel block? Only their data is
-            // read and shuffled; most steps touch none, as surfels are small next to a tile.
-            let slot = min(j + sg_lane, m - 1u);
-            let hit = j + sg_lane < m && (batch_blocks[slot] & my_blocks) != 0u;
-            var hits = subgroupBallot(hit).x;
-            if hits == 0u {
-                continue;
-            }
-            let mine = batch_surf[slot];
-            let mine_col = batch_color[slot];
-            while hits != 0u {
-                let k = firstTrailingBit(hits);   // front to back
-                hits &= hits - 1u;
+            let mine_slot = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
+            let mine = batch_surf[mine_slot];
+            let mine_col = batch_color[mine_slot];
+            let n = min(SG, num_hits - h);
+            for (var k = 0u; k < n; k++) {   // front to back
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
                                         subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
                 let alpha = surfel_alpha(s, px);
@@ -183,7 +199,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
                 acc_color += w * subgroupShuffle(mine_col, k);
                 acc_nd += w * s.normal_depth;
                 T = select(T, next_T, use_it);
-                last = select(last, base + j + k + 1u - range.x, use_it);
+                last = select(last, base + subgroupShuffle(mine_slot, k) + 1u - range.x, use_it);
             }
         }
         result.color[0] += acc_color;

@@ -13,15 +13,16 @@
 @compute @workgroup_size(256)
 #if USE_SUBGROUPS
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
-        @builtin(subgroup_invocation_id) sg_lane: u32) {
+        @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
 #else
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let sg_lane = 0u;
+    let sg_id = 0u;
 #endif
     let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
     let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
     let tile = wg.y * params.tile_grid.x + wg.x;
-    let r = composite_pixel(tile, vec2<f32>(pix) + 0.5, inside, lid, sg_lane);
+    let r = composite_pixel(tile, vec2<f32>(pix) + 0.5, inside, lid, sg_lane, sg_id);
     if !inside {
         return;
     }
