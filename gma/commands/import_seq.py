@@ -220,7 +220,7 @@ def register(subparsers) -> None:
 
     vd = fmt.add_parser(
         "video", help="a video: masks, camera and Anny body estimated (gma[video]) or supplied by the user",
-        description="With no --body/--camera, MediaPipe (pip install 'gma[video]') finds the person's mask and "
+        description="Without --body, MediaPipe (pip install 'gma[video]') finds the person's mask and "
         "landmarks in every frame and Anny is fitted to them. The camera is static with no zoom; its "
         "intrinsics come from --camera FILE (a JSON of fx, fy, cx, cy in pixels of the original video as "
         "OpenCV's calibration writes them, optional distortion k1, k2, p1, p2, k3: frames are then "

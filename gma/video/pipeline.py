@@ -98,8 +98,13 @@ def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, in
     return np.stack(out)
 
 
+# Bumped when the body fit changes in a way its settings do not show (2: per-pair weights of the 3D
+# directions), so that OUT.work/ never hands back a fit the current code would not make.
+FIT_CACHE_VERSION = 2
+
+
 def _fit_key(det, K: np.ndarray, cfg: FitConfig) -> str:
-    h = hashlib.sha1()
+    h = hashlib.sha1(f"fit v{FIT_CACHE_VERSION}".encode())
     for a in (det.pose2d, det.pose3d, det.hands2d, det.found, det.face, K):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(json.dumps(dataclasses.asdict(cfg), sort_keys=True).encode())
