@@ -122,6 +122,15 @@ def _body_behind_camera(seq):
     (seq / "cameras.json").write_text(json.dumps(cams))
 
 
+def _camera_case(tmp: Path, camera, *extra: str) -> list[str]:
+    """``gma import video`` of a valid 32×32 clip with ``camera`` (a dict, or raw text) as --camera."""
+    clip = tmp / "clip.mp4"
+    iio.imwrite(clip, np.full((2, 32, 32, 3), 128, np.uint8), fps=5, codec="libx264", macro_block_size=16)
+    cam = tmp / "cam.json"
+    cam.write_text(camera if isinstance(camera, str) else json.dumps(camera))
+    return ["import", "video", str(clip), str(tmp / "o"), "--camera", str(cam), *extra]
+
+
 def _tiny_images(seq):
     for folder in ("images", "masks"):
         for p in (seq / folder).iterdir():
@@ -259,6 +268,24 @@ CASES = [
          "--focal", argparse=True),
     Case("import --force over a user's folder",
          lambda t, s, a: ["import", "video", str(a), str(_user_folder(t / "mine")), "--force"], "mine"),
+    # gma import video --camera: a camera file of intrinsics
+    Case("import --camera without fy", lambda t, s, a: _camera_case(t, {"fx": 30, "cx": 16, "cy": 16}), "cam.json"),
+    Case("import --camera with a NaN focal",
+         lambda t, s, a: _camera_case(t, {"fx": float("nan"), "fy": 30, "cx": 16, "cy": 16}), "cam.json"),
+    Case("import --camera with a negative focal",
+         lambda t, s, a: _camera_case(t, {"fx": -30, "fy": -30, "cx": 16, "cy": 16}), "cam.json"),
+    Case("import --camera with a typo'd key",
+         lambda t, s, a: _camera_case(t, {"fx": 30, "fy": 30, "cx": 16, "cy": 16, "k_1": 0.1}), "cam.json"),
+    Case("import --camera that is not JSON", lambda t, s, a: _camera_case(t, "fx=30"), "cam.json"),
+    Case("import --camera with --focal",
+         lambda t, s, a: _camera_case(t, {"fx": 30, "fy": 30, "cx": 16, "cy": 16}, "--focal", "30"), "cam.json"),
+    Case("import --camera with the principal point outside the frame",
+         lambda t, s, a: _camera_case(t, {"fx": 30, "fy": 30, "cx": 400, "cy": 16}), "cam.json"),
+    Case("import --camera with absurd distortion",
+         lambda t, s, a: _camera_case(t, {"fx": 30, "fy": 30, "cx": 16, "cy": 16, "k1": 50}), "cam.json"),
+    Case("import --camera calibrated for another frame size",
+         lambda t, s, a: _camera_case(t, {"fx": 30, "fy": 30, "cx": 16, "cy": 16, "width": 1920, "height": 1080}),
+         "cam.json"),
     # gma import motion
     Case("import motion from a missing file", lambda t, s, a: ["import", "motion", str(t / "none.bvh"),
                                                                 str(t / "m.npz")], "none.bvh"),

@@ -184,6 +184,56 @@ def test_pipeline_on_synthetic_clip(tmp_path, synth_clip, rig, anny_body):
     assert again["frames_detect_reused"] == 10 and again["fit_resumed_from_cache"]
 
 
+def test_camera_file_undistorts_and_scales(tmp_path, synth_clip, anny_body):
+    """The synthetic clip seen through a distorting lens, imported with that lens's camera file and
+    --downscale 2 (body given, so no fit): the sequence's frames are the undistorted ones (close to the
+    clean clip's), and its K is the file's, in GMA's pixel convention, halved."""
+    pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
+    import cv2
+    import imageio.v3 as iio
+
+    from gma.data.importers._common import resize_frame
+    from gma.video import VideoImportConfig, estimate_sequence, read_video
+    from gma.video.camera import load_intrinsics
+
+    seq_gt, _ = synth_clip
+    K = seq_gt.cameras.K[0]
+    cam = {"fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2] - 0.5, "cy": K[1, 2] - 0.5, "k1": -0.5, "k2": 0.2,
+           "p1": 0.002, "p2": 0.0}  # moves the person's outline by 2-4 px, the corners by ~13 px
+    (tmp_path / "cam.json").write_text(json.dumps(cam))
+    intr = load_intrinsics(tmp_path / "cam.json")
+    H, W = seq_gt.height, seq_gt.width
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
+    und = cv2.undistortPoints(np.stack([xx.ravel(), yy.ravel()], -1)[:, None], intr.opencv_K(),
+                              np.asarray(intr.dist), P=intr.opencv_K())
+    map_x, map_y = (und[:, 0, i].reshape(H, W).astype(np.float32) for i in (0, 1))
+    clean = np.stack([seq_gt.image(i) for i in range(len(seq_gt))])
+    lens = np.stack([cv2.remap(f, map_x, map_y, cv2.INTER_LINEAR) for f in clean])
+    clip = tmp_path / "lens.mp4"
+    iio.imwrite(clip, lens, fps=10, codec="libx264", macro_block_size=16)
+
+    cfg = VideoImportConfig(camera=intr)
+    seq, report = estimate_sequence(clip, tmp_path / "seq", config=cfg, body=seq_gt.root / "body.npz", downscale=2,
+                                    progress=False, anny=anny_body)
+    assert (seq.width, seq.height) == (W // 2, H // 2)
+    np.testing.assert_allclose(seq.cameras.K[0], np.diag([0.5, 0.5, 1]) @ K, atol=1e-9)
+    assert report["camera"]["undistorted"] and report["camera"]["source"].endswith("cam.json")
+
+    def err(a, b):  # mean absolute difference inside the frame's central 80 %
+        m = (slice(H // 20, H // 2 - H // 20), slice(W // 20, W // 2 - W // 20))
+        return float(np.abs(a[m].astype(float) - b[m].astype(float)).mean())
+
+    def small(img):
+        return resize_frame(img, np.ones(img.shape[:2], np.float32), 2)[0]
+
+    decoded, _ = read_video(clip)  # the distorted frames as the import saw them (mp4 loses a little)
+    fixed = np.mean([err(seq.image(i), small(clean[i])) for i in range(len(seq))])
+    as_seen = np.mean([err(small(decoded[i]), small(clean[i])) for i in range(len(seq))])
+    # what mp4 alone costs (the clean clip's own encoding); two bilinear resamplings add ~0.2 to it
+    floor = np.mean([err(small(f), small(clean[i])) for i, f in enumerate(read_video(synth_clip[1])[0])])
+    assert fixed - floor < 0.35 * (as_seen - floor), (fixed, as_seen, floor)
+
+
 def test_no_person_is_a_clear_error(tmp_path):
     pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
     import imageio.v3 as iio

@@ -66,7 +66,7 @@ def _run(args: argparse.Namespace) -> int:
             smpl_dir=args.smpl_dir,
             **kw,
         )
-    elif args.body is None or args.camera is None:
+    elif args.body is None or args.camera is None or not _sequence_cameras(args.camera):
         return _estimate_video(args, kw)
     else:
         seq = importers.import_video(
@@ -90,17 +90,45 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sequence_cameras(path: str) -> bool:
+    """Whether ``--camera`` names a sequence-format ``cameras.json`` (with ``w2c``) rather than a file of
+    intrinsics; a file that is neither is reported by the loader of intrinsics."""
+    import json
+
+    try:
+        raw = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(raw, dict) and "w2c" in raw
+
+
+def _camera_intrinsics(args: argparse.Namespace):
+    """``--camera`` as intrinsics (``gma.video.camera.load_intrinsics``), or None; refuses it with --focal."""
+    if args.camera is None:
+        return None
+    from gma.video.camera import load_intrinsics
+
+    if _sequence_cameras(args.camera):
+        raise InputError(f"{args.camera}: a sequence's cameras.json (with w2c) needs --body; to estimate the body "
+                         "give a camera file of intrinsics (fx, fy, cx, cy, optional k1, k2, p1, p2, k3)")
+    if args.focal is not None:
+        raise InputError(f"{args.camera}: --focal and --camera both give the focal length; put it in the camera "
+                         "file (fx, fy) or drop --camera")
+    return load_intrinsics(args.camera)
+
+
 def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
-    """No --body/--camera: masks, camera and body from the video itself (gma.video, needs gma[video])."""
+    """Masks and body from the video itself (gma.video, needs gma[video]); the camera from --camera
+    (intrinsics), --focal or the default."""
     from gma.video import FitConfig, VideoImportConfig, estimate_sequence
 
     if args.alpha or args.mask_video is not None:
-        raise ValueError("--alpha/--mask-video need --body and --camera; without them give --mask-dir or no "
-                         "mask source (MediaPipe estimates the masks)")
-    if args.camera is not None:
-        raise ValueError("--camera needs --body; without --body give --focal instead (the camera is static)")
+        raise ValueError("--alpha/--mask-video need --body and a sequence's cameras.json (--camera); without them "
+                         "give --mask-dir or no mask source (MediaPipe estimates the masks)")
+    camera = _camera_intrinsics(args)
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
-    cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
+    cfg = VideoImportConfig(focal=args.focal, camera=camera, start=args.start, end=args.end, skip=args.skip,
+                            fit=fit)
     seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body, **kw)
     err = report.get("reprojection_error_px_mean")
     print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
@@ -138,7 +166,8 @@ def _import_motion(args: argparse.Namespace) -> int:
     from gma.video.motion import estimate_motion
 
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
-    cfg = VideoImportConfig(focal=args.focal, start=args.start, end=args.end, skip=args.skip, fit=fit)
+    cfg = VideoImportConfig(focal=args.focal, camera=_camera_intrinsics(args), start=args.start, end=args.end,
+                            skip=args.skip, fit=fit)
     motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force, feet=args.feet)
     if args.fps is not None and abs(args.fps - motion.fps) > 1e-6:
         motion.pose = resample(motion.pose, motion.fps, args.fps)
@@ -191,20 +220,23 @@ def register(subparsers) -> None:
 
     vd = fmt.add_parser(
         "video", help="a video: masks, camera and Anny body estimated (gma[video]) or supplied by the user",
-        description="With no --body/--camera, MediaPipe (pip install 'gma[video]') finds the person's mask and "
-        "landmarks in every frame and Anny is fitted to them. Camera assumptions: static, no zoom, square "
-        "pixels, no distortion, principal point at the image centre, focal length --focal or the image's "
-        "longer side. Resumable work is kept in OUT.work/; the report and a contact sheet of overlays land "
-        "in OUT (video_report.json, video_contact_sheet.png).",
+        description="Without --body, MediaPipe (pip install 'gma[video]') finds the person's mask and "
+        "landmarks in every frame and Anny is fitted to them. The camera is static with no zoom; its "
+        "intrinsics come from --camera FILE (a JSON of fx, fy, cx, cy in pixels of the original video as "
+        "OpenCV's calibration writes them, optional distortion k1, k2, p1, p2, k3: frames are then "
+        "undistorted), or else square pixels, no distortion, principal point at the image centre and focal "
+        "length --focal or the image's longer side. Resumable work is kept in OUT.work/; the report and a "
+        "contact sheet of overlays land in OUT (video_report.json, video_contact_sheet.png).",
     )
     _common(vd, "video file (anything ffmpeg reads)")
     _range(vd)
     vd.add_argument("--body", default=None, help="body.npz in the sequence format (all or selected frames); "
                     "default: fitted to the video")
-    vd.add_argument("--camera", default=None, help="cameras.json in the sequence format (with --body); "
-                    "default: a static camera")
+    vd.add_argument("--camera", default=None, help="the camera's intrinsics: JSON {fx, fy, cx, cy[, k1, k2, p1, "
+                    "p2, k3][, width, height]} in pixels of the original video (OpenCV convention); with --body, "
+                    "also a sequence's cameras.json. Default: a static camera from --focal")
     vd.add_argument("--focal", type=positive_float, default=None, help="focal length in pixels when estimating "
-                    "(default: the longer image side)")
+                    "without --camera (default: the longer image side)")
     vd.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 150],
                     metavar=("ROOT", "POSE", "SHAPE"),
                     help="body fit steps per stage (root only; all bones; bones + phenotype + silhouette)")
@@ -229,6 +261,7 @@ def register(subparsers) -> None:
     mo.add_argument("--force", action="store_true", help="overwrite OUT")
     _range(mo)
     mo.add_argument("--focal", type=positive_float, default=None, help="video: focal length in pixels")
+    mo.add_argument("--camera", default=None, help="video: the camera's intrinsics, as for gma import video")
     mo.add_argument("--feet", choices=("frame", "clip"), default="frame",
                     help="video: a foot on the floor in every frame (default; steadies the root) or only at the "
                          "clip's lowest point (keeps jumps)")

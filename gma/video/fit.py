@@ -29,7 +29,7 @@ import torch
 from tqdm import tqdm
 
 from gma.video.camera import CAMERA_FROM_WORLD
-from gma.video.landmarks import POSE_POINTS
+from gma.video.landmarks import BONE_PAIR_WEIGHTS, POSE_POINTS
 from gma.video.rig import AnnyRig
 from gma.video.silhouette import SilhouetteRenderer, crop_box
 from gma.video.targets import FitTargets
@@ -48,7 +48,7 @@ class FitConfig:
     iters_shape: int = 150  # stage 3: all bones, phenotype, silhouette
     lr: float = 0.03  # Adam step size (radians / metres)
     w_2d: float = 1.0  # 2D reprojection
-    w_3d: float = 0.3  # 3D bone directions
+    w_3d: float = 0.3  # 3D bone directions (per pair × gma.video.landmarks.BONE_PAIR_WEIGHTS)
     w_sil: float = 1.0  # mask silhouette (stage 3)
     w_smooth: float = 1.0  # temporal smoothness of model points (per m²)
     w_limit: float = 1.0  # joint limits (per rad²)
@@ -174,6 +174,7 @@ def fit_body(rig: AnnyRig, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray, ma
     transl = torch.as_tensor(tr0, dtype=torch.float32).clone().requires_grad_(True)
     limits = rig.limits[: n_bones - 1]
     torso = torch.tensor([rig.index(n) for n in _TORSO])
+    pair_w = torch.tensor(BONE_PAIR_WEIGHTS)
     sil = None
     if masks is not None and cfg.iters_shape > 0 and cfg.w_sil > 0:
         sil = SilhouetteRenderer(rig.body.faces, size=cfg.sil_size, seed=cfg.seed)
@@ -201,7 +202,7 @@ def fit_body(rig: AnnyRig, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray, ma
             cam = pts @ R.T
             d = cam[:, tg.pair_idx[:, 1]] - cam[:, tg.pair_idx[:, 0]]
             cos = (d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6) * tg.dirs3d).sum(-1)
-            terms["3d"] = cfg.w_3d * (tg.conf3d * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6)
+            terms["3d"] = cfg.w_3d * (tg.conf3d * pair_w * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6)
             ang = rotvecs[:, 1:].norm(dim=-1)
             terms["limit"] = cfg.w_limit * torch.relu(ang - limits).pow(2).sum(-1).mean()
             terms["prior"] = cfg.w_prior * ang.pow(2).sum(-1).mean()

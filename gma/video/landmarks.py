@@ -41,6 +41,7 @@ import numpy as np
 
 __all__ = [
     "BONE_PAIRS",
+    "BONE_PAIR_WEIGHTS",
     "HAND_POINTS",
     "POSE_FLIP",
     "POSE_POINTS",
@@ -85,6 +86,12 @@ BONE_PAIRS = [
     (23, 11), (24, 12),                      # flanks (torso lean)
     (27, 31), (28, 32),                      # feet
 ]
+# Weight of each pair's 3D direction in the fit (× FitConfig.w_3d). The arms need it: only MediaPipe's
+# depth tells a forearm pointing at the camera from one pointing away (on a 10-frame turn, arms came out
+# 43-65° off at a tenth of it). Elsewhere its bias costs more than it settles: on a 40-frame synthetic
+# turn, legs, feet and torso lines at full weight left the feet 33-45° off, the lower legs 24-32° and
+# the root 8°; at a tenth, 12-13°, 9-10° and 6.5° (benchmarks/video_to_avatar.py, docs/fitting.md).
+BONE_PAIR_WEIGHTS = [1.0] * 4 + [0.1] * 10
 
 
 def hand_points(side: str) -> list[str]:

@@ -27,9 +27,8 @@ from gma.body.motions import Motion
 from gma.body.retarget import rotation_between
 from gma.core.errors import InputError
 from gma.core.outputs import prepare_output_file
-from gma.video.camera import intrinsics
 from gma.video.frames import read_video
-from gma.video.pipeline import VideoImportConfig, detect_person, fit_detections, reusable_work, work_dir
+from gma.video.pipeline import VideoImportConfig, detect_person, fit_detections, reusable_work, video_camera, work_dir
 from gma.video.report import reprojection_errors
 
 __all__ = ["CAMERA_TO_ANNY", "estimate_motion", "upright_motion", "video_fps"]
@@ -77,10 +76,10 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     t0 = time.perf_counter()
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
     timings["decode"] = time.perf_counter() - t0
+    frames, K, _ = video_camera(frames, cfg)
     work = work_dir(out)
     with reusable_work(work):
         det, reused = detect_person(src, frames, work, progress, timings)
-        K = intrinsics(frames.shape[2], frames.shape[1], cfg.focal)
         pose, phenotype, info = fit_detections(det, det.masks, K, cfg, work, anny, progress, timings)
     body = anny if anny is not None else load_body("anny")
     shape = torch.from_numpy(np.asarray(phenotype, np.float32))

@@ -31,7 +31,7 @@ from gma.core.errors import GmaError, InputError
 from gma.data.importers._common import mask_from_array, write_imported
 from gma.data.importers.video import count_frames
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence, prepare_sequence_output
-from gma.video.camera import intrinsics, static_camera
+from gma.video.camera import CameraIntrinsics, Undistortion, intrinsics, static_camera
 from gma.video.detect import detect_frames
 from gma.video.fit import FitConfig, fit_body
 from gma.video.frames import read_video
@@ -51,12 +51,30 @@ class VideoImportConfig:
     """Settings of a video import without user-supplied body parameters."""
 
     focal: float | None = None  # focal length in pixels (default: the image's longer side)
+    camera: CameraIntrinsics | None = None  # the user's calibration (``--camera``); excludes ``focal``
     start: int = 0  # first video frame
     end: int | None = None  # stop before this frame
     skip: int = 1  # keep every N-th frame
     max_frames: int = 3000  # refuse longer selections (memory: frames are held decoded)
     sheet_frames: int = 12  # overlays on the contact sheet
     fit: FitConfig = field(default_factory=FitConfig)
+
+
+def video_camera(frames: np.ndarray, cfg: VideoImportConfig) -> tuple[np.ndarray, np.ndarray, Undistortion | None]:
+    """The camera of ``frames`` [T, H, W, 3]: (frames, undistorted when the camera file gives distortion,
+    K [3, 3] in GMA's pixel convention, the :class:`Undistortion` used or None). A camera file that does
+    not fit the frames, or together with ``focal``, is an :class:`InputError` naming it."""
+    H, W = frames.shape[1:3]
+    if cfg.camera is None:
+        return frames, intrinsics(W, H, cfg.focal), None
+    if cfg.focal is not None:
+        raise InputError(f"{cfg.camera.source}: give the focal length either in the camera file or with --focal, "
+                         "not both")
+    cfg.camera.check_frame(W, H)
+    if not cfg.camera.distorted:
+        return frames, cfg.camera.K(), None
+    undistort = Undistortion(cfg.camera, W, H)
+    return np.stack([undistort(f) for f in frames]), cfg.camera.K(), undistort
 
 
 def work_dir(out: str | os.PathLike) -> Path:
@@ -80,8 +98,13 @@ def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, in
     return np.stack(out)
 
 
+# Bumped when the body fit changes in a way its settings do not show (2: per-pair weights of the 3D
+# directions), so that OUT.work/ never hands back a fit the current code would not make.
+FIT_CACHE_VERSION = 2
+
+
 def _fit_key(det, K: np.ndarray, cfg: FitConfig) -> str:
-    h = hashlib.sha1()
+    h = hashlib.sha1(f"fit v{FIT_CACHE_VERSION}".encode())
     for a in (det.pose2d, det.pose3d, det.hands2d, det.found, det.face, K):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(json.dumps(dataclasses.asdict(cfg), sort_keys=True).encode())
@@ -107,10 +130,13 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
     n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
     timings["decode"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    frames, K, undistort = video_camera(frames, cfg)
+    timings["undistort"] = time.perf_counter() - t0
     work = work_dir(out)
     with reusable_work(work):
-        return _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress,
-                         anny, timings)
+        return _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale,
+                         overwrite, progress, anny, timings)
 
 
 @contextlib.contextmanager
@@ -140,16 +166,17 @@ def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, tim
     return det, reused
 
 
-def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite, progress, anny,
-              timings):
+def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite,
+              progress, anny, timings):
     T, H, W = frames.shape[:3]
     det, reused = detect_person(src, frames, work, progress, timings)
     if mask_dir is not None:
         total = n_src if n_src is not None else _count(src)
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
+        if undistort is not None:  # the user's masks are of the distorted frames
+            masks = np.stack([undistort(m) for m in masks])
     else:
         masks = det.masks
-    K = intrinsics(W, H, cfg.focal)
 
     if body is not None:
         (pose, phenotype), fit_info = _user_body(body, idx, src), {}
@@ -178,6 +205,19 @@ def _estimate(src, out, frames, idx, n_src, work, cfg, mask_dir, body, downscale
     seq = write_imported(out, pairs, T, cams, seq_body, None, downscale, overwrite, "write", extra)
     report["seconds"]["write"] = round(time.perf_counter() - t0, 3)
     return seq, report
+
+
+def _camera_report(K: np.ndarray, cfg: VideoImportConfig) -> dict:
+    """The camera as the report states it: K in GMA's convention at the video's size, and where it came from."""
+    out = {"focal_px": float(K[0, 0]), "focal_px_y": float(K[1, 1]),
+           "principal_point": [float(K[0, 2]), float(K[1, 2])]}
+    if cfg.camera is not None:
+        out["source"] = f"camera file {cfg.camera.source}"
+        out["distortion_k1_k2_p1_p2_k3"] = list(cfg.camera.dist)
+        out["undistorted"] = cfg.camera.distorted
+    else:
+        out["source"] = "--focal" if cfg.focal is not None else "default (longer image side, centred)"
+    return out
 
 
 def _count(src: Path) -> int:
@@ -263,8 +303,7 @@ def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_inf
         "frames_detect_reused": int(reused),
         "mask_iou_mean": round(float(ious.mean()), 4),
         "mask_iou_per_frame": [round(float(x), 4) for x in ious],
-        "camera": {"focal_px": float(K[0, 0]), "principal_point": [float(K[0, 2]), float(K[1, 2])],
-                   "focal_source": "user" if cfg.focal is not None else "default (longer image side)"},
+        "camera": _camera_report(K, cfg),
         "phenotype": [round(float(x), 4) for x in phenotype],
         "phenotype_named": {name: round(float(x), 4) for name, x in
                             zip(anny.param_spaces["shape"].labels, phenotype, strict=True)},
