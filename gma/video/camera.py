@@ -161,7 +161,13 @@ class Undistortion:
     without video. Needs OpenCV (``gma[video]``)."""
 
     def __init__(self, intr: CameraIntrinsics, width: int, height: int):
-        import cv2
+        try:
+            import cv2
+        except ImportError as exc:
+            from gma.video.detect import MissingExtraError
+
+            raise MissingExtraError(f"{intr.source}: undistorting frames needs OpenCV: pip install 'gma[video]' "
+                                    "(or give a camera file without distortion)") from exc
 
         self.width, self.height = width, height
         K = intr.opencv_K()
