@@ -239,23 +239,29 @@ class SurfelRasterizer:
         hw = cam.width * cam.height
         if n == 0:
             return SurfelGrads(*(np.zeros(shape, np.float32) for shape in ((0, 3), (0, 4), (0, 2), (0,), (0, c))))
-        upstream = []
-        for name, arr, per_pixel in (("v_color", v_color, c), ("v_alpha", v_alpha, 1), ("v_normal", v_normal, 3),
-                                     ("v_depth", v_depth, 1)):
+        # Without a loss on the normal or depth images the shader variant neither reads their upstream
+        # gradients nor computes the terms they scale, so those buffers are not even allocated.
+        normal_depth = v_normal is not None or v_depth is not None
+        upstream = {}
+        for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
+                                              (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
+            if binding >= 10 and not normal_depth:
+                continue
             if arr is None:
-                upstream.append(ctx.buffer(4 * hw * per_pixel, name))  # wgpu zero-fills new buffers
+                upstream[binding] = ctx.buffer(4 * hw * per_pixel, name)  # wgpu zero-fills new buffers
             else:
-                upstream.append(ctx.upload(np.asarray(arr, np.float32).reshape(-1), name))
+                upstream[binding] = ctx.upload(np.asarray(arr, np.float32).reshape(-1), name)
         v_proj = ctx.buffer(4 * 16 * n, "v_proj")
         v_colors = ctx.buffer(4 * c * n, "v_colors")
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
-        defines["NORMAL_DEPTH_GRADS"] = v_normal is not None or v_depth is not None
+        defines["NORMAL_DEPTH_GRADS"] = normal_depth
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
-                                    state.tile_ranges, state.background, state.final_t, state.last, *upstream,
-                                    v_proj, v_colors]))
+                                    state.tile_ranges, state.background, state.final_t, state.last]))
+        resources.update(upstream)
+        resources.update({12: v_proj, 13: v_colors})
         if defines["USE_SUBGROUPS"]:
             resources[14] = state.proj.pixel_bounds
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)

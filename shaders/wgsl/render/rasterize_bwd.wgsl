@@ -25,39 +25,58 @@ struct SurfelGrad {
     v_nd: vec4<f32>,     // normal (xyz), depth (w)
 }
 
-// d alpha / d(T, mu2d, opacity) scaled by v_alpha, for the alpha of docs/design.md, renderer contract steps 2-3.
-fn alpha_backward(s: ProjectedSurfel, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
-    let h_u = px.x * s.t2.xyz - s.t0.xyz;
-    let h_v = px.y * s.t2.xyz - s.t1.xyz;
-    let p = cross(h_u, h_v);
-    let d = px - vec2<f32>(s.t0.w, s.t1.w);
-    let sigma_2d = dot(d, d);
+// The quantities of one surfel's alpha at one pixel that its gradient reuses (renderer contract,
+// steps 2-3). Computed once per hit: the replay needs alpha before it knows the gradient's scale.
+struct AlphaEval {
+    h_u: vec3<f32>,
+    h_v: vec3<f32>,
+    p: vec3<f32>,
+    uv: vec2<f32>,
+    d: vec2<f32>,
+    e: f32,           // exp(-sigma)
+    raw: f32,         // opacity * e, before the clamp
+    use_3d: bool,     // sigma came from the ray-splat intersection (else from the 2D distance)
+}
+
+// Same arithmetic as surfel_alpha() in rasterize_core.wgsl, so alpha matches the forward bit for bit.
+fn eval_alpha(s: ProjectedSurfel, px: vec2<f32>) -> AlphaEval {
+    var a: AlphaEval;
+    a.h_u = px.x * s.t2.xyz - s.t0.xyz;
+    a.h_v = px.y * s.t2.xyz - s.t1.xyz;
+    a.p = cross(a.h_u, a.h_v);
+    a.d = px - vec2<f32>(s.t0.w, s.t1.w);
+    let sigma_2d = dot(a.d, a.d);
     var sigma = sigma_2d;
-    var use_3d = false;
-    var uv = vec2<f32>(0.0);
-    if p.z != 0.0 {
-        uv = p.xy / p.z;
-        let sigma_3d = 0.5 * dot(uv, uv);
-        use_3d = sigma_3d <= sigma_2d;
+    a.use_3d = false;
+    a.uv = vec2<f32>(0.0);
+    if a.p.z != 0.0 {
+        a.uv = a.p.xy / a.p.z;
+        let sigma_3d = 0.5 * dot(a.uv, a.uv);
+        a.use_3d = sigma_3d <= sigma_2d;
         sigma = min(sigma, sigma_3d);
     }
-    let e = exp(-sigma);
-    let raw = s.t2.w * e;
-    if raw >= MAX_ALPHA {
+    a.e = exp(-sigma);
+    a.raw = s.t2.w * a.e;
+    return a;
+}
+
+// d alpha / d(T, mu2d, opacity) scaled by v_alpha, from the evaluation above.
+fn alpha_backward(a: AlphaEval, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
+    if a.raw >= MAX_ALPHA {
         return;  // clamped: alpha no longer depends on the surfel
     }
-    (*g).v_opacity += v_alpha * e;
-    let v_sigma = -v_alpha * raw;
-    if use_3d {
-        let v_uv = v_sigma * uv;
-        let v_p = vec3<f32>(v_uv / p.z, -dot(v_uv, uv) / p.z);
-        let v_hu = cross(h_v, v_p);
-        let v_hv = cross(v_p, h_u);
+    (*g).v_opacity += v_alpha * a.e;
+    let v_sigma = -v_alpha * a.raw;
+    if a.use_3d {
+        let v_uv = v_sigma * a.uv;
+        let v_p = vec3<f32>(v_uv / a.p.z, -dot(v_uv, a.uv) / a.p.z);
+        let v_hu = cross(a.h_v, v_p);
+        let v_hv = cross(v_p, a.h_u);
         (*g).v_t0 -= v_hu;
         (*g).v_t1 -= v_hv;
         (*g).v_t2 += px.x * v_hu + px.y * v_hv;
     } else {
-        (*g).v_mu2d += -2.0 * v_sigma * d;
+        (*g).v_mu2d += -2.0 * v_sigma * a.d;
     }
 }
 
@@ -133,8 +152,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     }
 #endif
     let v_a = select(0.0, v_out_alpha[p], inside);
+#if NORMAL_DEPTH_GRADS
     let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
                                                    v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
+#else
+    let v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers hold zeros)
+#endif
     var acc_a = 0.0;
     var acc_nd = vec4<f32>(0.0);
 
@@ -178,27 +201,36 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
                 let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
+#if NORMAL_DEPTH_GRADS
+                let nd = subgroupShuffle(mine.normal_depth, k);
+#else
+                let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
+#endif
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                                        subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
+                                        subgroupShuffle(mine.t2, k), nd);
                 let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
-                let alpha = surfel_alpha(s, px);
+                let ae = eval_alpha(s, px);
+                let alpha = min(MAX_ALPHA, ae.raw);
                 let contrib = idx < last && alpha >= ALPHA_THRESHOLD;
                 let ra = 1.0 / (1.0 - alpha);
                 let T_i = T * ra;
                 let w = select(0.0, alpha * T_i, contrib);
-                var v_alpha = dot(v_col4, T_i * col - acc_col4 * ra)
-                            + v_a * (T_i - acc_a * ra)
-                            + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
+                var v_alpha = dot(v_col4, T_i * col - acc_col4 * ra) + v_a * (T_i - acc_a * ra);
+#if NORMAL_DEPTH_GRADS
+                v_alpha += dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
+#endif
                 v_alpha = select(0.0, v_alpha, contrib);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
                 var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-                alpha_backward(s, px, v_alpha, &g);
+                alpha_backward(ae, px, v_alpha, &g);
                 g.v_nd = w * v_nd;
                 let g_col = w * v_col4;
                 acc_col4 += w * col;
                 acc_a += w;
+#if NORMAL_DEPTH_GRADS
                 acc_nd += w * s.normal_depth;
+#endif
                 T = select(T, T_i, contrib);
                 if subgroupAny(contrib) {
                     // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
@@ -237,7 +269,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 continue;
             }
             let s = batch_surf[j];
-            let alpha = surfel_alpha(s, px);
+            let ae = eval_alpha(s, px);
+            let alpha = min(MAX_ALPHA, ae.raw);
             if alpha < ALPHA_THRESHOLD {
                 continue;
             }
@@ -258,7 +291,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
             var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-            alpha_backward(s, px, v_alpha, &g);
+            alpha_backward(ae, px, v_alpha, &g);
             g.v_nd = w * v_nd;
             flush(sid, g);
             acc_a += w;
