@@ -121,13 +121,176 @@ fn background4() -> vec4<f32> {
                      select(0.0, background[min(3u, last)], CHANNELS > 3u));
 }
 
-@compute @workgroup_size(256)
 #if USE_SUBGROUPS
+// The subgroup variant (CPU drivers; at most 4 channels) gives each thread two pixels of the tile, the
+// same column two rows apart, so that a subgroup covers a 4x4 pixel block (SG = 8) instead of 4x2.
+// Each hit's gradient is summed over both pixels and then over the subgroup before the atomic adds,
+// and on lavapipe those adds (one locked compare-exchange per value) dominated this pass: doubling the
+// pixels behind each flush halves the flushes of every surfel that covers both halves of a block.
+// The shuffles that pass a surfel between the lanes are also shared by two pixels.
+const WG_THREADS: u32 = 128u;
+
+// First pixel of thread `lid` in its tile (the second is 2 rows below): 4x4 blocks, a subgroup of 8
+// lanes taking the top 4x2 half of its block.
+fn tile_pixel_pair(lid: u32) -> vec2<u32> {
+    return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 3u) & 12u) | ((lid >> 2u) & 1u));
+}
+
+// Replay state of one pixel (see the plain variant below for the quantities).
+struct PixelReplay {
+    px: vec2<f32>,
+    T: f32,
+    last: u32,
+    v_col: vec4<f32>,
+    acc_col: vec4<f32>,
+    v_a: f32,
+    acc_a: f32,
+    v_nd: vec4<f32>,
+    acc_nd: vec4<f32>,
+}
+
+fn start_replay(pix: vec2<u32>) -> PixelReplay {
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
+    var r: PixelReplay;
+    r.px = vec2<f32>(pix) + 0.5;
+    r.T = select(1.0, final_t[p], inside);
+    r.last = select(0u, last_index[p], inside);
+    // Colours in one vec4 register: any dynamically indexed private array would be placed in per-lane
+    // scratch memory by CPU drivers, making every access in the loop a gather.
+    r.v_col = select(vec4<f32>(0.0), upstream_color4(p), inside);
+    r.acc_col = r.T * background4();
+    r.v_a = select(0.0, v_out_alpha[p], inside);
+    r.acc_a = 0.0;
+#if NORMAL_DEPTH_GRADS
+    r.v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
+                                                 v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
+#else
+    r.v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers are not bound)
+#endif
+    r.acc_nd = vec4<f32>(0.0);
+    return r;
+}
+
+// Step pixel `r` back over surfel `s` (colour `col`, local intersection index `idx`): adds the pixel's
+// gradient to `g` and returns its colour gradient; `hit` says whether the surfel contributed.
+fn replay_hit(s: ProjectedSurfel, col: vec4<f32>, idx: u32, r: ptr<function, PixelReplay>,
+              g: ptr<function, SurfelGrad>, hit: ptr<function, bool>) -> vec4<f32> {
+    let ae = eval_alpha(s, (*r).px);
+    let alpha = min(MAX_ALPHA, ae.raw);
+    let contrib = idx < (*r).last && alpha >= ALPHA_THRESHOLD;
+    let ra = 1.0 / (1.0 - alpha);
+    let T_i = (*r).T * ra;
+    let w = select(0.0, alpha * T_i, contrib);
+    var v_alpha = dot((*r).v_col, T_i * col - (*r).acc_col * ra) + (*r).v_a * (T_i - (*r).acc_a * ra);
+#if NORMAL_DEPTH_GRADS
+    v_alpha += dot((*r).v_nd, T_i * s.normal_depth - (*r).acc_nd * ra);
+    (*g).v_nd += w * (*r).v_nd;
+    (*r).acc_nd += w * s.normal_depth;
+#endif
+    alpha_backward(ae, (*r).px, select(0.0, v_alpha, contrib), g);
+    (*r).acc_col += w * col;
+    (*r).acc_a += w;
+    (*r).T = select((*r).T, T_i, contrib);
+    *hit = contrib;
+    return w * (*r).v_col;
+}
+
+@compute @workgroup_size(128)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let pix = wg.xy * TILE_SIZE + tile_pixel_pair(lid);
+    var pa = start_replay(pix);
+    var pb = start_replay(pix + vec2<u32>(0u, 2u));
+
+    let range = ranges[tile];
+    if lid == 0u {
+        atomicStore(&tile_last, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&tile_last, max(pa.last, pb.last));
+    // Batches behind every pixel's last contributor need no replay.
+    let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
+    let num_batches = ceil_div(count, BATCH);
+    let tile_px = vec2<u32>(pa.px) % TILE_SIZE;
+    let my_blocks = subgroupOr(block_bit(tile_px) | block_bit(tile_px + vec2<u32>(0u, 2u)));
+    let block_last = subgroupMax(max(pa.last, pb.last));
+    let row = sg_id * BATCH;
+    for (var bi = 0u; bi < num_batches; bi++) {
+        let b = num_batches - 1u - bi;
+        let start = b * BATCH;   // local index of the batch's first intersection
+        workgroupBarrier();
+        for (var slot = lid; slot < BATCH; slot += WG_THREADS) {
+            if start + slot < count {
+                let sid = isect_ids[range.x + start + slot];
+                batch_ids[slot] = sid;
+                stage_surfel(slot, sid, tile);
+            }
+        }
+        workgroupBarrier();
+        let m = min(BATCH, count - start);
+        // Surfels pass between lanes by shuffles (see rasterize_core.wgsl, which also explains the hit
+        // list). Only slots before the subgroup's furthest last contributor matter.
+        let num_hits = list_hits(m, my_blocks, select(0u, block_last - start, block_last > start), row, sg_lane);
+        for (var hh = 0u; hh < num_hits; hh += SG) {
+            let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
+            let n = num_hits - hh - h0;
+            let mine_slot = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
+            let mine = batch_surf[mine_slot];
+            let mine_col = batch_color[mine_slot];
+            let mine_id = batch_ids[mine_slot];
+            for (var kk = 0u; kk < n; kk++) {
+                let k = n - 1u - kk;               // back to front
+                let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
+#if NORMAL_DEPTH_GRADS
+                let nd = subgroupShuffle(mine.normal_depth, k);
 #else
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+                let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
 #endif
+                let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
+                                        subgroupShuffle(mine.t2, k), nd);
+                let col = subgroupShuffle(mine_col, k);
+                let sid = subgroupShuffle(mine_id, k);
+                // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
+                var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
+                var hit_a = false;
+                var hit_b = false;
+                let g_col = replay_hit(s, col, idx, &pa, &g, &hit_a) + replay_hit(s, col, idx, &pb, &g, &hit_b);
+                if subgroupAny(hit_a || hit_b) {
+                    // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
+                    // log2(SG) xor-shuffles of packed vec4s.
+                    var a = vec4<f32>(g.v_t0, g.v_opacity);
+                    var b = vec4<f32>(g.v_t1, g.v_mu2d.x);
+                    var c = vec4<f32>(g.v_t2, g.v_mu2d.y);
+                    var d = g.v_nd;
+                    var e = g_col;
+                    for (var off = SG / 2u; off > 0u; off >>= 1u) {
+                        a += subgroupShuffleXor(a, off);
+                        b += subgroupShuffleXor(b, off);
+                        c += subgroupShuffleXor(c, off);
+#if NORMAL_DEPTH_GRADS
+                        d += subgroupShuffleXor(d, off);
+#endif
+                        e += subgroupShuffleXor(e, off);
+                    }
+                    let r = SurfelGrad(a.xyz, b.xyz, c.xyz, vec2<f32>(b.w, c.w), a.w, d);
+                    // One lane adds the totals. (Spreading the adds over the lanes, value i by lane i, was
+                    // slower on lavapipe: 401 against 372 ms for this pass at 100k surfels.)
+                    if sg_lane == 0u {  // every lane is active here: the skips above are subgroup-uniform
+                        flush(sid, r);
+                        for (var c = 0u; c < CHANNELS; c++) {
+                            add_color(sid * CHANNELS + c, e[c]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+#else
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
     let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
     let tile = wg.y * params.tile_grid.x + wg.x;
@@ -138,19 +301,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // later surfels, the background term for colour included (out = sum w c + T_final bg).
     var T = select(1.0, final_t[p], inside);
     let last = select(0u, last_index[p], inside);
-#if USE_SUBGROUPS
-    // At most 4 channels here, kept in vec4 registers: any dynamically indexed private array would be
-    // placed in per-lane scratch memory by CPU drivers, making every access in the loop a gather.
-    let v_col4 = select(vec4<f32>(0.0), upstream_color4(p), inside);
-    var acc_col4 = T * background4();
-#else
     var v_col: array<vec4<f32>, CHUNKS>;
     var acc_col: array<vec4<f32>, CHUNKS>;
     for (var c = 0u; c < CHANNELS; c++) {
         v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
         acc_col[c / 4u][c % 4u] = T * background[c];
     }
-#endif
     let v_a = select(0.0, v_out_alpha[p], inside);
 #if NORMAL_DEPTH_GRADS
     let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
@@ -182,86 +338,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
         workgroupBarrier();
         let m = min(BATCH, count - start);
-#if USE_SUBGROUPS
-        // Uniform over the subgroup: surfels pass between lanes by shuffles (see rasterize_core.wgsl,
-        // which also explains the hit list) and each surfel's gradient is summed over the subgroup
-        // before the atomic adds, which the lanes share.
-        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
-        let block_last = subgroupMax(last);
-        let row = sg_id * BATCH;
-        // Only slots before the subgroup's furthest last contributor matter.
-        let num_hits = list_hits(m, my_blocks, select(0u, block_last - start, block_last > start), row, sg_lane);
-        for (var hh = 0u; hh < num_hits; hh += SG) {
-            let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
-            let n = num_hits - hh - h0;
-            let mine_slot = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
-            let mine = batch_surf[mine_slot];
-            let mine_col = batch_color[mine_slot];
-            let mine_id = batch_ids[mine_slot];
-            for (var kk = 0u; kk < n; kk++) {
-                let k = n - 1u - kk;               // back to front
-                let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
-#if NORMAL_DEPTH_GRADS
-                let nd = subgroupShuffle(mine.normal_depth, k);
-#else
-                let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
-#endif
-                let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                                        subgroupShuffle(mine.t2, k), nd);
-                let col = subgroupShuffle(mine_col, k);
-                let sid = subgroupShuffle(mine_id, k);
-                let ae = eval_alpha(s, px);
-                let alpha = min(MAX_ALPHA, ae.raw);
-                let contrib = idx < last && alpha >= ALPHA_THRESHOLD;
-                let ra = 1.0 / (1.0 - alpha);
-                let T_i = T * ra;
-                let w = select(0.0, alpha * T_i, contrib);
-                var v_alpha = dot(v_col4, T_i * col - acc_col4 * ra) + v_a * (T_i - acc_a * ra);
-#if NORMAL_DEPTH_GRADS
-                v_alpha += dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
-#endif
-                v_alpha = select(0.0, v_alpha, contrib);
-                // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
-                var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-                alpha_backward(ae, px, v_alpha, &g);
-                g.v_nd = w * v_nd;
-                let g_col = w * v_col4;
-                acc_col4 += w * col;
-                acc_a += w;
-#if NORMAL_DEPTH_GRADS
-                acc_nd += w * s.normal_depth;
-#endif
-                T = select(T, T_i, contrib);
-                if subgroupAny(contrib) {
-                    // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
-                    // log2(SG) xor-shuffles of packed vec4s.
-                    var a = vec4<f32>(g.v_t0, g.v_opacity);
-                    var b = vec4<f32>(g.v_t1, g.v_mu2d.x);
-                    var c = vec4<f32>(g.v_t2, g.v_mu2d.y);
-                    var d = g.v_nd;
-                    var e = g_col;
-                    for (var off = SG / 2u; off > 0u; off >>= 1u) {
-                        a += subgroupShuffleXor(a, off);
-                        b += subgroupShuffleXor(b, off);
-                        c += subgroupShuffleXor(c, off);
-#if NORMAL_DEPTH_GRADS
-                        d += subgroupShuffleXor(d, off);
-#endif
-                        e += subgroupShuffleXor(e, off);
-                    }
-                    let r = SurfelGrad(a.xyz, b.xyz, c.xyz, vec2<f32>(b.w, c.w), a.w, d);
-                    // One lane adds the totals. (Spreading the adds over the lanes, value i by lane i, was
-                    // slower on lavapipe: 401 against 372 ms for this pass at 100k surfels.)
-                    if sg_lane == 0u {  // every lane is active here: the skips above are subgroup-uniform
-                        flush(sid, r);
-                        for (var c = 0u; c < CHANNELS; c++) {
-                            add_color(sid * CHANNELS + c, e[c]);
-                        }
-                    }
-                }
-            }
-        }
-#else
         for (var jj = 0u; jj < m; jj++) {
             let j = m - 1u - jj;
             let idx = start + j;
@@ -298,6 +374,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             acc_nd += w * s.normal_depth;
             T = T_i;
         }
-#endif
     }
 }
+#endif
