@@ -130,7 +130,6 @@ fn background4() -> vec4<f32> {
 // pass a surfel between the lanes are shared by the four pixels too. Standard scene, 100k surfels, this
 // pass on lavapipe: 358 ms with one pixel per thread, 273 with two, 236 with four.
 const WG_THREADS: u32 = 64u;
-const ROW_STEP: vec2<u32> = vec2<u32>(0u, 2u);   // from one of a thread's pixels to the next
 
 // First pixel of thread `lid` in its tile: 4x8 blocks (4 across, 2 down), 8 consecutive threads
 // taking the block's rows 0-1 (and through their other pixels rows 2-7).

@@ -134,7 +134,8 @@ fn stage_surfel(slot: u32, sid: u32, tile: u32) {
     }
 }
 
-fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32, sg_id: u32) -> PixelResult {
+// The plain variant (GPUs): one pixel per thread, 256 threads per tile.
+fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelResult {
     var result: PixelResult;
     var T = 1.0;
     var done = !inside;
@@ -159,27 +160,123 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         workgroupBarrier();
         let was_done = done;
         let m = min(BATCH, range.y - base);
+        if !done {
+            for (var j = 0u; j < m; j++) {
+                if !blend(batch_surf[j], px, j, base + j + 1u - range.x, &result, &T) {
+                    done = true;
+                    break;
+                }
+            }
+        }
+        if done && !was_done {
+            atomicAdd(&done_count, 1u);
+        }
+    }
+    result.transmittance = T;
+    return result;
+}
+
 #if USE_SUBGROUPS
-        // CPU drivers (lavapipe) run a subgroup as one SIMD register and turn every workgroup-memory read
-        // with a loop-varying index into one scalar load per lane, and every branch into masked work.
-        // So each lane reads one surfel, the subgroup passes them around with shuffles, and the blend
-        // is written branch-free with selects. Same arithmetic as blend() above.
-        // This path assumes CHUNKS == 1 (at most 4 channels): the driver mishandles shuffles of
-        // private-array elements, so colours stay in one vec4 register here.
-        var acc_color = vec4<f32>(0.0);
-        var acc_nd = vec4<f32>(0.0);
-        var last = 0u;
-        // The subgroup's pixels form 4x2 blocks (see tile_pixel); a surfel whose screen bounds miss
-        // them is skipped by the whole subgroup at once. First the staged surfels that can touch this
-        // subgroup's blocks go, in order, into its row of hit_slots; only then is surfel data read, SG
-        // hits at a time. Lavapipe runs every branch body (masked) and every loop body at least once, so
-        // reading SG staged surfels per step, hit or not, paid the reads and one blend for each of ~4x
-        // as many steps (standard scene, 100k surfels: forward pass -5 %, backward pass -20 %).
-        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
-        let row = sg_id * BATCH;
+// The subgroup variant (CPU drivers such as lavapipe) of composite_pixel, for at most 4 channels.
+// Lavapipe runs a subgroup as one SIMD register, turns every workgroup-memory read with a loop-varying
+// index into one scalar load per lane and every branch into masked work. So each lane reads one surfel,
+// the subgroup passes them around with shuffles, and the blend is written branch-free with selects
+// (same arithmetic as blend() above). Colours stay in one vec4 register: the driver mishandles
+// shuffles of private-array elements.
+//
+// Each thread composites PIXELS_PER_THREAD pixels of one column, ROW_STEP apart, so that a subgroup of 8
+// covers a 4x4 block (see tile_pixel_pair) and every surfel passed around serves twice as many pixels.
+// A surfel whose screen bounds miss the subgroup's block is skipped by the whole subgroup at once: the
+// staged surfels that can touch it first go, in order, into its row of hit_slots, and only then is
+// surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
+// least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
+// of ~4x as many steps: standard scene, 100k surfels, forward pass -5 %, backward pass -20 %.)
+const RASTER_THREADS: u32 = 128u;
+const ROW_STEP: vec2<u32> = vec2<u32>(0u, 2u);
+
+// First pixel of thread `lid` in its tile (the second is ROW_STEP below): 4x4 blocks, 8 consecutive
+// threads taking a block's rows 0-1.
+fn tile_pixel_pair(lid: u32) -> vec2<u32> {
+    return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 3u) & 12u) | ((lid >> 2u) & 1u));
+}
+
+// One pixel's compositing state: the result so far and this batch's sums (added at the batch's end).
+struct PixelBlend {
+    px: vec2<f32>,
+    T: f32,
+    done: bool,
+    acc_color: vec4<f32>,
+    acc_nd: vec4<f32>,
+    last: u32,
+    result: PixelResult,
+}
+
+fn start_blend(pix: vec2<u32>) -> PixelBlend {
+    var b: PixelBlend;
+    b.px = vec2<f32>(pix) + 0.5;
+    b.T = 1.0;
+    b.done = !(pix.x < params.image_size.x && pix.y < params.image_size.y);
+    b.result.transmittance = 1.0;
+    return b;
+}
+
+fn blend_select(s: ProjectedSurfel, col: vec4<f32>, index: u32, b: ptr<function, PixelBlend>) {
+    let alpha = surfel_alpha(s, (*b).px);
+    let next_T = (*b).T * (1.0 - alpha);
+    let contrib = alpha >= ALPHA_THRESHOLD && !(*b).done;
+    let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
+    let use_it = contrib && !saturate;
+    (*b).done = (*b).done || saturate;
+    let w = select(0.0, alpha * (*b).T, use_it);
+    (*b).acc_color += w * col;
+    (*b).acc_nd += w * s.normal_depth;
+    (*b).T = select((*b).T, next_T, use_it);
+    (*b).last = select((*b).last, index, use_it);
+}
+
+fn end_batch(b: ptr<function, PixelBlend>) {
+    (*b).result.color[0] += (*b).acc_color;
+    (*b).result.normal += (*b).acc_nd.xyz;
+    (*b).result.depth += (*b).acc_nd.w;
+    (*b).result.last = max((*b).result.last, (*b).last);
+    (*b).acc_color = vec4<f32>(0.0);
+    (*b).acc_nd = vec4<f32>(0.0);
+    (*b).last = 0u;
+    (*b).result.transmittance = (*b).T;
+}
+
+// composite_pixel for the two pixels of thread `lid` (first pixel `pix`, global), into *a and *b.
+fn composite_pair(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
+                  a: ptr<function, PixelBlend>, b: ptr<function, PixelBlend>) {
+    *a = start_blend(pix);
+    *b = start_blend(pix + ROW_STEP);
+    if lid == 0u {
+        atomicStore(&done_count, 0u);
+    }
+    workgroupBarrier();
+    atomicAdd(&done_count, u32((*a).done) + u32((*b).done));
+    let range = ranges[tile];
+    let num_batches = ceil_div(range.y - range.x, BATCH);
+    let tile_px = pix % TILE_SIZE;
+    let my_blocks = subgroupOr(block_bit(tile_px) | block_bit(tile_px + ROW_STEP));
+    let row = sg_id * BATCH;
+    for (var bi = 0u; bi < num_batches; bi++) {
+        // Uniform exit: also the barrier that protects the batch buffers from being overwritten early.
+        if workgroupUniformLoad(&done_count) >= TILE_SIZE * TILE_SIZE {
+            break;
+        }
+        let base = range.x + bi * BATCH;
+        for (var slot = lid; slot < BATCH; slot += RASTER_THREADS) {
+            if base + slot < range.y {
+                stage_surfel(slot, isect_ids[base + slot], tile);
+            }
+        }
+        workgroupBarrier();
+        let was_done = u32((*a).done) + u32((*b).done);
+        let m = min(BATCH, range.y - base);
         let num_hits = list_hits(m, my_blocks, m, row, sg_lane);
         for (var h = 0u; h < num_hits; h += SG) {
-            if subgroupAll(done) {
+            if subgroupAll((*a).done && (*b).done) {
                 break;
             }
             let mine_slot = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
@@ -189,37 +286,18 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
             for (var k = 0u; k < n; k++) {   // front to back
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
                                         subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
-                let alpha = surfel_alpha(s, px);
-                let next_T = T * (1.0 - alpha);
-                let contrib = alpha >= ALPHA_THRESHOLD && !done;
-                let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
-                let use_it = contrib && !saturate;
-                done = done || saturate;
-                let w = select(0.0, alpha * T, use_it);
-                acc_color += w * subgroupShuffle(mine_col, k);
-                acc_nd += w * s.normal_depth;
-                T = select(T, next_T, use_it);
-                last = select(last, base + subgroupShuffle(mine_slot, k) + 1u - range.x, use_it);
+                let col = subgroupShuffle(mine_col, k);
+                let index = base + subgroupShuffle(mine_slot, k) + 1u - range.x;
+                blend_select(s, col, index, a);
+                blend_select(s, col, index, b);
             }
         }
-        result.color[0] += acc_color;
-        result.normal += acc_nd.xyz;
-        result.depth += acc_nd.w;
-        result.last = max(result.last, last);
-#else
-        if !done {
-            for (var j = 0u; j < m; j++) {
-                if !blend(batch_surf[j], px, j, base + j + 1u - range.x, &result, &T) {
-                    done = true;
-                    break;
-                }
-            }
-        }
-#endif
-        if done && !was_done {
-            atomicAdd(&done_count, 1u);
+        end_batch(a);
+        end_batch(b);
+        let now_done = u32((*a).done) + u32((*b).done);
+        if now_done != was_done {
+            atomicAdd(&done_count, now_done - was_done);
         }
     }
-    result.transmittance = T;
-    return result;
 }
+#endif
