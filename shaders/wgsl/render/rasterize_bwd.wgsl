@@ -123,19 +123,12 @@ fn background4() -> vec4<f32> {
 
 #if USE_SUBGROUPS
 // The subgroup variant (CPU drivers; at most 4 channels) gives each thread four pixels of the tile, in
-// one column at rows y, y + 2, y + 4, y + 6, so that a subgroup of 8 lanes covers a 4x8 pixel block
-// instead of 4x2. Each hit's gradient is summed over the four pixels and then over the subgroup before
+// one column at rows y, y + 2, y + 4, y + 6 (tile_pixel_quad in rasterize_core.wgsl), so that a
+// subgroup of 8 lanes covers a 4x8 pixel block instead of 4x2. Each hit's gradient is summed over the four pixels and then over the subgroup before
 // the atomic adds, and on lavapipe those adds (one locked compare-exchange per value) dominated this
 // pass: a surfel is flushed once per block it touches, and the blocks are 4x larger. The shuffles that
 // pass a surfel between the lanes are shared by the four pixels too. Standard scene, 100k surfels, this
 // pass on lavapipe: 358 ms with one pixel per thread, 273 with two, 236 with four.
-const WG_THREADS: u32 = 64u;
-
-// First pixel of thread `lid` in its tile: 4x8 blocks (4 across, 2 down), 8 consecutive threads
-// taking the block's rows 0-1 (and through their other pixels rows 2-7).
-fn tile_pixel_quad(lid: u32) -> vec2<u32> {
-    return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 2u) & 8u) | ((lid >> 2u) & 1u));
-}
 
 // Replay state of one pixel (see the plain variant below for the quantities).
 struct PixelReplay {
@@ -197,7 +190,7 @@ fn replay_hit(s: ProjectedSurfel, col: vec4<f32>, idx: u32, r: ptr<function, Pix
     return w * (*r).v_col;
 }
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(64)   // RASTER_THREADS
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
     let tile = wg.y * params.tile_grid.x + wg.x;
@@ -218,15 +211,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
     let num_batches = ceil_div(count, BATCH);
     let tile_px = pix % TILE_SIZE;
-    let my_blocks = subgroupOr(block_bit(tile_px) | block_bit(tile_px + ROW_STEP) | block_bit(tile_px + 2u * ROW_STEP)
-                               | block_bit(tile_px + 3u * ROW_STEP));
+    let my_blocks = subgroupOr(quad_blocks(tile_px));
     let block_last = subgroupMax(last);
     let row = sg_id * BATCH;
     for (var bi = 0u; bi < num_batches; bi++) {
         let b = num_batches - 1u - bi;
         let start = b * BATCH;   // local index of the batch's first intersection
         workgroupBarrier();
-        for (var slot = lid; slot < BATCH; slot += WG_THREADS) {
+        for (var slot = lid; slot < BATCH; slot += RASTER_THREADS) {
             if start + slot < count {
                 let sid = isect_ids[range.x + start + slot];
                 batch_ids[slot] = sid;

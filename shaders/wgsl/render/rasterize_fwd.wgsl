@@ -28,15 +28,19 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
 
 // One-dimensional workgroups: subgroup builtins are only defined for those.
 #if USE_SUBGROUPS
-@compute @workgroup_size(128)   // two pixels per thread (see composite_pair)
+@compute @workgroup_size(64)   // RASTER_THREADS: four pixels per thread (see composite_quad)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
-    let pix = wg.xy * TILE_SIZE + tile_pixel_pair(lid);
+    let pix = wg.xy * TILE_SIZE + tile_pixel_quad(lid);
     var a: PixelBlend;
     var b: PixelBlend;
-    composite_pair(wg.y * params.tile_grid.x + wg.x, pix, lid, sg_lane, sg_id, &a, &b);
+    var c: PixelBlend;
+    var d: PixelBlend;
+    composite_quad(wg.y * params.tile_grid.x + wg.x, pix, lid, sg_lane, sg_id, &a, &b, &c, &d);
     write_pixel(pix, a.result);
     write_pixel(pix + ROW_STEP, b.result);
+    write_pixel(pix + 2u * ROW_STEP, c.result);
+    write_pixel(pix + 3u * ROW_STEP, d.result);
 }
 #else
 @compute @workgroup_size(256)
