@@ -16,7 +16,7 @@
 // Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
 var<workgroup> batch_blocks: array<u32, BATCH>;
 // Per subgroup (row sg_id * BATCH): the batch slots whose block mask meets the subgroup's blocks.
-var<workgroup> hit_slots: array<u32, BATCH * (256u / SG)>;
+var<workgroup> hit_slots: array<u32, BATCH * (RASTER_THREADS / SG)>;
 
 // Write, in slot order, the slots among the first `m` staged ones that touch `blocks` and lie before
 // `limit` into hit_slots[row..]; returns their number (uniform over the subgroup).
