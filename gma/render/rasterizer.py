@@ -26,6 +26,7 @@ from gma.render.surfels import SurfelBuffers
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
 MAX_WORKGROUPS = 65535
+DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
 RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
 
 
@@ -154,7 +155,7 @@ class SurfelRasterizer:
                                     st.depth_order, st.pixel_bounds], ((n + 255) // 256, 1, 1), "project", timer)
         depth_info = scratch("depth_sort.info", 16, INDIRECT)
         ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
-        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, 32, timer)
+        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, DEPTH_KEY_BITS, timer)
         self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
         self._setup(encoder, st, timer)
         return st
