@@ -101,12 +101,15 @@ def test_edge_cases_and_heavy_overlap(gpu):
     assert_grads_close(gpu_grads(gpu, dense, cam, up), reference_grads(dense, cam, up))
 
 
-@pytest.mark.parametrize("which", [("color",), ("alpha",), ("normal", "depth")])
-def test_upstream_on_a_subset_of_outputs(gpu, which):
+@pytest.mark.parametrize("subgroups", [True, False])
+@pytest.mark.parametrize("which", [("color",), ("alpha",), ("normal", "depth"), ("depth",)])
+def test_upstream_on_a_subset_of_outputs(gpu, which, subgroups):
+    """Without normal or depth upstream the kernels drop those terms and bindings (NORMAL_DEPTH_GRADS)."""
     scene = torch_scene(200, seed=6)
     cam = default_camera(30, 26)
     up = random_upstream(cam, seed=5, which=which)
-    assert_grads_close(gpu_grads(gpu, scene, cam, up), reference_grads(scene, cam, up))
+    got = gpu_grads(gpu, scene, cam, up, subgroups=subgroups)
+    assert_grads_close(got, reference_grads(scene, cam, up))
 
 
 def test_autograd_function(gpu):

@@ -26,6 +26,8 @@ from gma.render.surfels import SurfelBuffers
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
 MAX_WORKGROUPS = 65535
+DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
+RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
 
 
 @dataclass
@@ -91,12 +93,13 @@ class SurfelRasterizer:
 
     # -- variants -----------------------------------------------------------------------------------
     def raster_defines(self, channels: int) -> dict:
-        """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel +
-        16 B per 4 channels, and for the subgroup path 4 B of block mask plus a 4 B hit-list entry per
-        subgroup), and the subgroup path on CPU adapters (see rasterize_core.wgsl)."""
+        """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel,
+        4 B of surfel id in the backward, 16 B per 4 channels, and for the subgroup path 4 B of block
+        mask plus a 4 B hit-list entry per subgroup), and the subgroup path on CPU adapters (see
+        rasterize_core.wgsl)."""
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
         sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
-        per_surfel = 64 + 16 * ((channels + 3) // 4) + (4 + 4 * (256 // sg) if sg else 0)
+        per_surfel = 68 + 16 * ((channels + 3) // 4) + (4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 0)
         batch = 256
         while batch > 32 and batch * per_surfel + 64 > limit:
             batch //= 2
@@ -152,7 +155,7 @@ class SurfelRasterizer:
                                     st.depth_order, st.pixel_bounds], ((n + 255) // 256, 1, 1), "project", timer)
         depth_info = scratch("depth_sort.info", 16, INDIRECT)
         ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
-        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, 32, timer)
+        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, DEPTH_KEY_BITS, timer)
         self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
         self._setup(encoder, st, timer)
         return st
@@ -239,23 +242,29 @@ class SurfelRasterizer:
         hw = cam.width * cam.height
         if n == 0:
             return SurfelGrads(*(np.zeros(shape, np.float32) for shape in ((0, 3), (0, 4), (0, 2), (0,), (0, c))))
-        upstream = []
-        for name, arr, per_pixel in (("v_color", v_color, c), ("v_alpha", v_alpha, 1), ("v_normal", v_normal, 3),
-                                     ("v_depth", v_depth, 1)):
+        # Without a loss on the normal or depth images the shader variant neither reads their upstream
+        # gradients nor computes the terms they scale, so those buffers are not even allocated.
+        normal_depth = v_normal is not None or v_depth is not None
+        upstream = {}
+        for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
+                                              (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
+            if binding >= 10 and not normal_depth:
+                continue
             if arr is None:
-                upstream.append(ctx.buffer(4 * hw * per_pixel, name))  # wgpu zero-fills new buffers
+                upstream[binding] = ctx.buffer(4 * hw * per_pixel, name)  # wgpu zero-fills new buffers
             else:
-                upstream.append(ctx.upload(np.asarray(arr, np.float32).reshape(-1), name))
+                upstream[binding] = ctx.upload(np.asarray(arr, np.float32).reshape(-1), name)
         v_proj = ctx.buffer(4 * 16 * n, "v_proj")
         v_colors = ctx.buffer(4 * c * n, "v_colors")
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
-        defines["NORMAL_DEPTH_GRADS"] = v_normal is not None or v_depth is not None
+        defines["NORMAL_DEPTH_GRADS"] = normal_depth
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
-                                    state.tile_ranges, state.background, state.final_t, state.last, *upstream,
-                                    v_proj, v_colors]))
+                                    state.tile_ranges, state.background, state.final_t, state.last]))
+        resources.update(upstream)
+        resources.update({12: v_proj, 13: v_colors})
         if defines["USE_SUBGROUPS"]:
             resources[14] = state.proj.pixel_bounds
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)

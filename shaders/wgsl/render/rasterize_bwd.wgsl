@@ -25,39 +25,58 @@ struct SurfelGrad {
     v_nd: vec4<f32>,     // normal (xyz), depth (w)
 }
 
-// d alpha / d(T, mu2d, opacity) scaled by v_alpha, for the alpha of docs/design.md, renderer contract steps 2-3.
-fn alpha_backward(s: ProjectedSurfel, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
-    let h_u = px.x * s.t2.xyz - s.t0.xyz;
-    let h_v = px.y * s.t2.xyz - s.t1.xyz;
-    let p = cross(h_u, h_v);
-    let d = px - vec2<f32>(s.t0.w, s.t1.w);
-    let sigma_2d = dot(d, d);
+// The quantities of one surfel's alpha at one pixel that its gradient reuses (renderer contract,
+// steps 2-3). Computed once per hit: the replay needs alpha before it knows the gradient's scale.
+struct AlphaEval {
+    h_u: vec3<f32>,
+    h_v: vec3<f32>,
+    p: vec3<f32>,
+    uv: vec2<f32>,
+    d: vec2<f32>,
+    e: f32,           // exp(-sigma)
+    raw: f32,         // opacity * e, before the clamp
+    use_3d: bool,     // sigma came from the ray-splat intersection (else from the 2D distance)
+}
+
+// Same arithmetic as surfel_alpha() in rasterize_core.wgsl, so alpha matches the forward bit for bit.
+fn eval_alpha(s: ProjectedSurfel, px: vec2<f32>) -> AlphaEval {
+    var a: AlphaEval;
+    a.h_u = px.x * s.t2.xyz - s.t0.xyz;
+    a.h_v = px.y * s.t2.xyz - s.t1.xyz;
+    a.p = cross(a.h_u, a.h_v);
+    a.d = px - vec2<f32>(s.t0.w, s.t1.w);
+    let sigma_2d = dot(a.d, a.d);
     var sigma = sigma_2d;
-    var use_3d = false;
-    var uv = vec2<f32>(0.0);
-    if p.z != 0.0 {
-        uv = p.xy / p.z;
-        let sigma_3d = 0.5 * dot(uv, uv);
-        use_3d = sigma_3d <= sigma_2d;
+    a.use_3d = false;
+    a.uv = vec2<f32>(0.0);
+    if a.p.z != 0.0 {
+        a.uv = a.p.xy / a.p.z;
+        let sigma_3d = 0.5 * dot(a.uv, a.uv);
+        a.use_3d = sigma_3d <= sigma_2d;
         sigma = min(sigma, sigma_3d);
     }
-    let e = exp(-sigma);
-    let raw = s.t2.w * e;
-    if raw >= MAX_ALPHA {
+    a.e = exp(-sigma);
+    a.raw = s.t2.w * a.e;
+    return a;
+}
+
+// d alpha / d(T, mu2d, opacity) scaled by v_alpha, from the evaluation above.
+fn alpha_backward(a: AlphaEval, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
+    if a.raw >= MAX_ALPHA {
         return;  // clamped: alpha no longer depends on the surfel
     }
-    (*g).v_opacity += v_alpha * e;
-    let v_sigma = -v_alpha * raw;
-    if use_3d {
-        let v_uv = v_sigma * uv;
-        let v_p = vec3<f32>(v_uv / p.z, -dot(v_uv, uv) / p.z);
-        let v_hu = cross(h_v, v_p);
-        let v_hv = cross(v_p, h_u);
+    (*g).v_opacity += v_alpha * a.e;
+    let v_sigma = -v_alpha * a.raw;
+    if a.use_3d {
+        let v_uv = v_sigma * a.uv;
+        let v_p = vec3<f32>(v_uv / a.p.z, -dot(v_uv, a.uv) / a.p.z);
+        let v_hu = cross(a.h_v, v_p);
+        let v_hv = cross(v_p, a.h_u);
         (*g).v_t0 -= v_hu;
         (*g).v_t1 -= v_hv;
         (*g).v_t2 += px.x * v_hu + px.y * v_hv;
     } else {
-        (*g).v_mu2d += -2.0 * v_sigma * d;
+        (*g).v_mu2d += -2.0 * v_sigma * a.d;
     }
 }
 
@@ -102,41 +121,85 @@ fn background4() -> vec4<f32> {
                      select(0.0, background[min(3u, last)], CHANNELS > 3u));
 }
 
-@compute @workgroup_size(256)
 #if USE_SUBGROUPS
+// The subgroup variant (CPU drivers; at most 4 channels) gives each thread four pixels of the tile, in
+// one column at rows y, y + 2, y + 4, y + 6 (tile_pixel_quad in rasterize_core.wgsl), so that a
+// subgroup of 8 lanes covers a 4x8 pixel block instead of 4x2. Each hit's gradient is summed over the four pixels and then over the subgroup before
+// the atomic adds, and on lavapipe those adds (one locked compare-exchange per value) dominated this
+// pass: a surfel is flushed once per block it touches, and the blocks are 4x larger. The shuffles that
+// pass a surfel between the lanes are shared by the four pixels too. Standard scene, 100k surfels, this
+// pass on lavapipe: 358 ms with one pixel per thread, 273 with two, 236 with four.
+
+// Replay state of one pixel (see the plain variant below for the quantities).
+struct PixelReplay {
+    px: vec2<f32>,
+    T: f32,
+    last: u32,
+    v_col: vec4<f32>,
+    acc_col: vec4<f32>,
+    v_a: f32,
+    acc_a: f32,
+    v_nd: vec4<f32>,
+    acc_nd: vec4<f32>,
+}
+
+fn start_replay(pix: vec2<u32>) -> PixelReplay {
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
+    var r: PixelReplay;
+    r.px = vec2<f32>(pix) + 0.5;
+    r.T = select(1.0, final_t[p], inside);
+    r.last = select(0u, last_index[p], inside);
+    // Colours in one vec4 register: any dynamically indexed private array would be placed in per-lane
+    // scratch memory by CPU drivers, making every access in the loop a gather.
+    r.v_col = select(vec4<f32>(0.0), upstream_color4(p), inside);
+    r.acc_col = r.T * background4();
+    r.v_a = select(0.0, v_out_alpha[p], inside);
+    r.acc_a = 0.0;
+#if NORMAL_DEPTH_GRADS
+    r.v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
+                                                 v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
+#else
+    r.v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers are not bound)
+#endif
+    r.acc_nd = vec4<f32>(0.0);
+    return r;
+}
+
+// Step pixel `r` back over surfel `s` (colour `col`, local intersection index `idx`): adds the pixel's
+// gradient to `g` and returns its colour gradient; `hit` says whether the surfel contributed.
+fn replay_hit(s: ProjectedSurfel, col: vec4<f32>, idx: u32, r: ptr<function, PixelReplay>,
+              g: ptr<function, SurfelGrad>, hit: ptr<function, bool>) -> vec4<f32> {
+    let ae = eval_alpha(s, (*r).px);
+    let alpha = min(MAX_ALPHA, ae.raw);
+    let contrib = idx < (*r).last && alpha >= ALPHA_THRESHOLD;
+    let ra = 1.0 / (1.0 - alpha);
+    let T_i = (*r).T * ra;
+    let w = select(0.0, alpha * T_i, contrib);
+    var v_alpha = dot((*r).v_col, T_i * col - (*r).acc_col * ra) + (*r).v_a * (T_i - (*r).acc_a * ra);
+#if NORMAL_DEPTH_GRADS
+    v_alpha += dot((*r).v_nd, T_i * s.normal_depth - (*r).acc_nd * ra);
+    (*g).v_nd += w * (*r).v_nd;
+    (*r).acc_nd += w * s.normal_depth;
+#endif
+    alpha_backward(ae, (*r).px, select(0.0, v_alpha, contrib), g);
+    (*r).acc_col += w * col;
+    (*r).acc_a += w;
+    (*r).T = select((*r).T, T_i, contrib);
+    *hit = contrib;
+    return w * (*r).v_col;
+}
+
+@compute @workgroup_size(64)   // RASTER_THREADS
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
-#else
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-#endif
-    let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
-    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
     let tile = wg.y * params.tile_grid.x + wg.x;
-    let px = vec2<f32>(pix) + 0.5;
-    let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
-
-    // Per-pixel state of the replay. `acc_*` hold what lies behind the current surfel: sum of w f over
-    // later surfels, the background term for colour included (out = sum w c + T_final bg).
-    var T = select(1.0, final_t[p], inside);
-    let last = select(0u, last_index[p], inside);
-#if USE_SUBGROUPS
-    // At most 4 channels here, kept in vec4 registers: any dynamically indexed private array would be
-    // placed in per-lane scratch memory by CPU drivers, making every access in the loop a gather.
-    let v_col4 = select(vec4<f32>(0.0), upstream_color4(p), inside);
-    var acc_col4 = T * background4();
-#else
-    var v_col: array<vec4<f32>, CHUNKS>;
-    var acc_col: array<vec4<f32>, CHUNKS>;
-    for (var c = 0u; c < CHANNELS; c++) {
-        v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
-        acc_col[c / 4u][c % 4u] = T * background[c];
-    }
-#endif
-    let v_a = select(0.0, v_out_alpha[p], inside);
-    let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
-                                                   v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
-    var acc_a = 0.0;
-    var acc_nd = vec4<f32>(0.0);
+    let pix = wg.xy * TILE_SIZE + tile_pixel_quad(lid);
+    var pa = start_replay(pix);
+    var pb = start_replay(pix + ROW_STEP);
+    var pc = start_replay(pix + 2u * ROW_STEP);
+    var pd = start_replay(pix + 3u * ROW_STEP);
+    let last = max(max(pa.last, pb.last), max(pc.last, pd.last));
 
     let range = ranges[tile];
     if lid == 0u {
@@ -147,26 +210,25 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // Batches behind every pixel's last contributor need no replay.
     let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
     let num_batches = ceil_div(count, BATCH);
-    // Only the intersections before the tile's furthest last contributor matter.
+    let tile_px = pix % TILE_SIZE;
+    let my_blocks = subgroupOr(quad_blocks(tile_px));
+    let block_last = subgroupMax(last);
+    let row = sg_id * BATCH;
     for (var bi = 0u; bi < num_batches; bi++) {
         let b = num_batches - 1u - bi;
         let start = b * BATCH;   // local index of the batch's first intersection
         workgroupBarrier();
-        if lid < BATCH && start + lid < count {
-            let sid = isect_ids[range.x + start + lid];
-            batch_ids[lid] = sid;
-            stage_surfel(lid, sid, tile);
+        for (var slot = lid; slot < BATCH; slot += RASTER_THREADS) {
+            if start + slot < count {
+                let sid = isect_ids[range.x + start + slot];
+                batch_ids[slot] = sid;
+                stage_surfel(slot, sid, tile);
+            }
         }
         workgroupBarrier();
         let m = min(BATCH, count - start);
-#if USE_SUBGROUPS
-        // Uniform over the subgroup: surfels pass between lanes by shuffles (see rasterize_core.wgsl,
-        // which also explains the hit list) and each surfel's gradient is summed over the subgroup
-        // before the atomic adds, which the lanes share.
-        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
-        let block_last = subgroupMax(last);
-        let row = sg_id * BATCH;
-        // Only slots before the subgroup's furthest last contributor matter.
+        // Surfels pass between lanes by shuffles (see rasterize_core.wgsl, which also explains the hit
+        // list). Only slots before the subgroup's furthest last contributor matter.
         let num_hits = list_hits(m, my_blocks, select(0u, block_last - start, block_last > start), row, sg_lane);
         for (var hh = 0u; hh < num_hits; hh += SG) {
             let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
@@ -178,29 +240,24 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
                 let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
+#if NORMAL_DEPTH_GRADS
+                let nd = subgroupShuffle(mine.normal_depth, k);
+#else
+                let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
+#endif
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                                        subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
+                                        subgroupShuffle(mine.t2, k), nd);
                 let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
-                let alpha = surfel_alpha(s, px);
-                let contrib = idx < last && alpha >= ALPHA_THRESHOLD;
-                let ra = 1.0 / (1.0 - alpha);
-                let T_i = T * ra;
-                let w = select(0.0, alpha * T_i, contrib);
-                var v_alpha = dot(v_col4, T_i * col - acc_col4 * ra)
-                            + v_a * (T_i - acc_a * ra)
-                            + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
-                v_alpha = select(0.0, v_alpha, contrib);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
                 var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-                alpha_backward(s, px, v_alpha, &g);
-                g.v_nd = w * v_nd;
-                let g_col = w * v_col4;
-                acc_col4 += w * col;
-                acc_a += w;
-                acc_nd += w * s.normal_depth;
-                T = select(T, T_i, contrib);
-                if subgroupAny(contrib) {
+                var hit_a = false;
+                var hit_b = false;
+                var hit_c = false;
+                var hit_d = false;
+                let g_col = replay_hit(s, col, idx, &pa, &g, &hit_a) + replay_hit(s, col, idx, &pb, &g, &hit_b)
+                          + replay_hit(s, col, idx, &pc, &g, &hit_c) + replay_hit(s, col, idx, &pd, &g, &hit_d);
+                if subgroupAny(hit_a || hit_b || hit_c || hit_d) {
                     // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
                     // log2(SG) xor-shuffles of packed vec4s.
                     var a = vec4<f32>(g.v_t0, g.v_opacity);
@@ -229,7 +286,58 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 }
             }
         }
+    }
+}
 #else
+@compute @workgroup_size(256)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let pix = wg.xy * TILE_SIZE + tile_pixel(lid);
+    let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let px = vec2<f32>(pix) + 0.5;
+    let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
+
+    // Per-pixel state of the replay. `acc_*` hold what lies behind the current surfel: sum of w f over
+    // later surfels, the background term for colour included (out = sum w c + T_final bg).
+    var T = select(1.0, final_t[p], inside);
+    let last = select(0u, last_index[p], inside);
+    var v_col: array<vec4<f32>, CHUNKS>;
+    var acc_col: array<vec4<f32>, CHUNKS>;
+    for (var c = 0u; c < CHANNELS; c++) {
+        v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
+        acc_col[c / 4u][c % 4u] = T * background[c];
+    }
+    let v_a = select(0.0, v_out_alpha[p], inside);
+#if NORMAL_DEPTH_GRADS
+    let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
+                                                   v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
+#else
+    let v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers are not bound)
+#endif
+    var acc_a = 0.0;
+    var acc_nd = vec4<f32>(0.0);
+
+    let range = ranges[tile];
+    if lid == 0u {
+        atomicStore(&tile_last, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&tile_last, last);
+    // Batches behind every pixel's last contributor need no replay.
+    let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
+    let num_batches = ceil_div(count, BATCH);
+    // Only the intersections before the tile's furthest last contributor matter.
+    for (var bi = 0u; bi < num_batches; bi++) {
+        let b = num_batches - 1u - bi;
+        let start = b * BATCH;   // local index of the batch's first intersection
+        workgroupBarrier();
+        if lid < BATCH && start + lid < count {
+            let sid = isect_ids[range.x + start + lid];
+            batch_ids[lid] = sid;
+            stage_surfel(lid, sid, tile);
+        }
+        workgroupBarrier();
+        let m = min(BATCH, count - start);
         for (var jj = 0u; jj < m; jj++) {
             let j = m - 1u - jj;
             let idx = start + j;
@@ -237,7 +345,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 continue;
             }
             let s = batch_surf[j];
-            let alpha = surfel_alpha(s, px);
+            let ae = eval_alpha(s, px);
+            let alpha = min(MAX_ALPHA, ae.raw);
             if alpha < ALPHA_THRESHOLD {
                 continue;
             }
@@ -258,13 +367,13 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
             var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-            alpha_backward(s, px, v_alpha, &g);
+            alpha_backward(ae, px, v_alpha, &g);
             g.v_nd = w * v_nd;
             flush(sid, g);
             acc_a += w;
             acc_nd += w * s.normal_depth;
             T = T_i;
         }
-#endif
     }
 }
+#endif

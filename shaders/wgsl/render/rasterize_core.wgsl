@@ -1,7 +1,7 @@
 // Tiled front-to-back compositing shared by the buffer and texture variants of the forward rasterizer.
-// One workgroup per 16x16 tile, one thread per pixel. Surfels are staged BATCH at a time in workgroup
-// memory; the tile stops early once every pixel is saturated. Defines: CHANNELS, BATCH, USE_SUBGROUPS
-// and SG (the subgroup size) for the subgroup variant.
+// One workgroup per 16x16 tile, one thread per pixel (four in the subgroup variant). Surfels are
+// staged BATCH at a time in workgroup memory; the tile stops early once every pixel is saturated.
+// Defines: CHANNELS, BATCH, USE_SUBGROUPS and SG (the subgroup size) for the subgroup variant.
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
 
@@ -16,7 +16,7 @@
 // Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
 var<workgroup> batch_blocks: array<u32, BATCH>;
 // Per subgroup (row sg_id * BATCH): the batch slots whose block mask meets the subgroup's blocks.
-var<workgroup> hit_slots: array<u32, BATCH * (256u / SG)>;
+var<workgroup> hit_slots: array<u32, BATCH * (RASTER_THREADS / SG)>;
 
 // Write, in slot order, the slots among the first `m` staged ones that touch `blocks` and lie before
 // `limit` into hit_slots[row..]; returns their number (uniform over the subgroup).
@@ -134,7 +134,8 @@ fn stage_surfel(slot: u32, sid: u32, tile: u32) {
     }
 }
 
-fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u32, sg_id: u32) -> PixelResult {
+// The plain variant (GPUs): one pixel per thread, 256 threads per tile.
+fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelResult {
     var result: PixelResult;
     var T = 1.0;
     var done = !inside;
@@ -159,27 +160,132 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
         workgroupBarrier();
         let was_done = done;
         let m = min(BATCH, range.y - base);
+        if !done {
+            for (var j = 0u; j < m; j++) {
+                if !blend(batch_surf[j], px, j, base + j + 1u - range.x, &result, &T) {
+                    done = true;
+                    break;
+                }
+            }
+        }
+        if done && !was_done {
+            atomicAdd(&done_count, 1u);
+        }
+    }
+    result.transmittance = T;
+    return result;
+}
+
 #if USE_SUBGROUPS
-        // CPU drivers (lavapipe) run a subgroup as one SIMD register and turn every workgroup-memory read
-        // with a loop-varying index into one scalar load per lane, and every branch into masked work.
-        // So each lane reads one surfel, the subgroup passes them around with shuffles, and the blend
-        // is written branch-free with selects. Same arithmetic as blend() above.
-        // This path assumes CHUNKS == 1 (at most 4 channels): the driver mishandles shuffles of
-        // private-array elements, so colours stay in one vec4 register here.
-        var acc_color = vec4<f32>(0.0);
-        var acc_nd = vec4<f32>(0.0);
-        var last = 0u;
-        // The subgroup's pixels form 4x2 blocks (see tile_pixel); a surfel whose screen bounds miss
-        // them is skipped by the whole subgroup at once. First the staged surfels that can touch this
-        // subgroup's blocks go, in order, into its row of hit_slots; only then is surfel data read, SG
-        // hits at a time. Lavapipe runs every branch body (masked) and every loop body at least once, so
-        // reading SG staged surfels per step, hit or not, paid the reads and one blend for each of ~4x
-        // as many steps (standard scene, 100k surfels: forward pass -5 %, backward pass -20 %).
-        let my_blocks = subgroupOr(block_bit(vec2<u32>(px) % TILE_SIZE));
-        let row = sg_id * BATCH;
+// The subgroup variant (CPU drivers such as lavapipe) of composite_pixel, for at most 4 channels.
+// Lavapipe runs a subgroup as one SIMD register, turns every workgroup-memory read with a loop-varying
+// index into one scalar load per lane and every branch into masked work. So each lane reads one surfel,
+// the subgroup passes them around with shuffles, and the blend is written branch-free with selects
+// (same arithmetic as blend() above). Colours stay in one vec4 register: the driver mishandles
+// shuffles of private-array elements.
+//
+// Each thread composites four pixels of one column, ROW_STEP apart, so that a subgroup of 8 covers a
+// 4x8 block (see tile_pixel_quad) and every surfel passed around serves four times as many pixels
+// (standard scene, 100k surfels, this pass on lavapipe: 133 ms with one pixel per thread, 102 with two,
+// 96 with four). A surfel whose screen bounds miss the subgroup's block is skipped by the whole subgroup at once: the
+// staged surfels that can touch it first go, in order, into its row of hit_slots, and only then is
+// surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
+// least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
+// of ~4x as many steps: standard scene, 100k surfels, forward pass -5 %, backward pass -20 %.)
+const RASTER_THREADS: u32 = 64u;                  // per tile: four pixels each
+const ROW_STEP: vec2<u32> = vec2<u32>(0u, 2u);   // from one of a thread's pixels to the next
+
+// First pixel of thread `lid` in its tile: 4x8 blocks (4 across, 2 down), 8 consecutive threads
+// taking a block's rows 0-1 and, through their other pixels, rows 2-7.
+fn tile_pixel_quad(lid: u32) -> vec2<u32> {
+    return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 2u) & 8u) | ((lid >> 2u) & 1u));
+}
+
+// Blocks of the tile (see block_bit) that the pixels of a thread whose first pixel is `p` lie in.
+fn quad_blocks(p: vec2<u32>) -> u32 {
+    return block_bit(p) | block_bit(p + ROW_STEP) | block_bit(p + 2u * ROW_STEP) | block_bit(p + 3u * ROW_STEP);
+}
+
+// One pixel's compositing state: the result so far and this batch's sums (added at the batch's end).
+struct PixelBlend {
+    px: vec2<f32>,
+    T: f32,
+    done: bool,
+    acc_color: vec4<f32>,
+    acc_nd: vec4<f32>,
+    last: u32,
+    result: PixelResult,
+}
+
+fn start_blend(pix: vec2<u32>) -> PixelBlend {
+    var b: PixelBlend;
+    b.px = vec2<f32>(pix) + 0.5;
+    b.T = 1.0;
+    b.done = !(pix.x < params.image_size.x && pix.y < params.image_size.y);
+    b.result.transmittance = 1.0;
+    return b;
+}
+
+fn blend_select(s: ProjectedSurfel, col: vec4<f32>, index: u32, b: ptr<function, PixelBlend>) {
+    let alpha = surfel_alpha(s, (*b).px);
+    let next_T = (*b).T * (1.0 - alpha);
+    let contrib = alpha >= ALPHA_THRESHOLD && !(*b).done;
+    let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
+    let use_it = contrib && !saturate;
+    (*b).done = (*b).done || saturate;
+    let w = select(0.0, alpha * (*b).T, use_it);
+    (*b).acc_color += w * col;
+    (*b).acc_nd += w * s.normal_depth;
+    (*b).T = select((*b).T, next_T, use_it);
+    (*b).last = select((*b).last, index, use_it);
+}
+
+fn end_batch(b: ptr<function, PixelBlend>) {
+    (*b).result.color[0] += (*b).acc_color;
+    (*b).result.normal += (*b).acc_nd.xyz;
+    (*b).result.depth += (*b).acc_nd.w;
+    (*b).result.last = max((*b).result.last, (*b).last);
+    (*b).acc_color = vec4<f32>(0.0);
+    (*b).acc_nd = vec4<f32>(0.0);
+    (*b).last = 0u;
+    (*b).result.transmittance = (*b).T;
+}
+
+// composite_pixel for the four pixels of thread `lid` (first pixel `pix`, global), into *a .. *d.
+fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
+                  a: ptr<function, PixelBlend>, b: ptr<function, PixelBlend>,
+                  c: ptr<function, PixelBlend>, d: ptr<function, PixelBlend>) {
+    *a = start_blend(pix);
+    *b = start_blend(pix + ROW_STEP);
+    *c = start_blend(pix + 2u * ROW_STEP);
+    *d = start_blend(pix + 3u * ROW_STEP);
+    if lid == 0u {
+        atomicStore(&done_count, 0u);
+    }
+    workgroupBarrier();
+    atomicAdd(&done_count, u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done));
+    let range = ranges[tile];
+    let num_batches = ceil_div(range.y - range.x, BATCH);
+    let tile_px = pix % TILE_SIZE;
+    let my_blocks = subgroupOr(quad_blocks(tile_px));
+    let row = sg_id * BATCH;
+    for (var bi = 0u; bi < num_batches; bi++) {
+        // Uniform exit: also the barrier that protects the batch buffers from being overwritten early.
+        if workgroupUniformLoad(&done_count) >= TILE_SIZE * TILE_SIZE {
+            break;
+        }
+        let base = range.x + bi * BATCH;
+        for (var slot = lid; slot < BATCH; slot += RASTER_THREADS) {
+            if base + slot < range.y {
+                stage_surfel(slot, isect_ids[base + slot], tile);
+            }
+        }
+        workgroupBarrier();
+        let was_done = u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done);
+        let m = min(BATCH, range.y - base);
         let num_hits = list_hits(m, my_blocks, m, row, sg_lane);
         for (var h = 0u; h < num_hits; h += SG) {
-            if subgroupAll(done) {
+            if subgroupAll((*a).done && (*b).done && (*c).done && (*d).done) {
                 break;
             }
             let mine_slot = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
@@ -189,37 +295,22 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32, sg_lane: u3
             for (var k = 0u; k < n; k++) {   // front to back
                 let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
                                         subgroupShuffle(mine.t2, k), subgroupShuffle(mine.normal_depth, k));
-                let alpha = surfel_alpha(s, px);
-                let next_T = T * (1.0 - alpha);
-                let contrib = alpha >= ALPHA_THRESHOLD && !done;
-                let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
-                let use_it = contrib && !saturate;
-                done = done || saturate;
-                let w = select(0.0, alpha * T, use_it);
-                acc_color += w * subgroupShuffle(mine_col, k);
-                acc_nd += w * s.normal_depth;
-                T = select(T, next_T, use_it);
-                last = select(last, base + subgroupShuffle(mine_slot, k) + 1u - range.x, use_it);
+                let col = subgroupShuffle(mine_col, k);
+                let index = base + subgroupShuffle(mine_slot, k) + 1u - range.x;
+                blend_select(s, col, index, a);
+                blend_select(s, col, index, b);
+                blend_select(s, col, index, c);
+                blend_select(s, col, index, d);
             }
         }
-        result.color[0] += acc_color;
-        result.normal += acc_nd.xyz;
-        result.depth += acc_nd.w;
-        result.last = max(result.last, last);
-#else
-        if !done {
-            for (var j = 0u; j < m; j++) {
-                if !blend(batch_surf[j], px, j, base + j + 1u - range.x, &result, &T) {
-                    done = true;
-                    break;
-                }
-            }
-        }
-#endif
-        if done && !was_done {
-            atomicAdd(&done_count, 1u);
+        end_batch(a);
+        end_batch(b);
+        end_batch(c);
+        end_batch(d);
+        let now_done = u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done);
+        if now_done != was_done {
+            atomicAdd(&done_count, now_done - was_done);
         }
     }
-    result.transmittance = T;
-    return result;
 }
+#endif
