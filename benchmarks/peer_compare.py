@@ -3,10 +3,12 @@
 through the public ``gma.render.rasterize`` call as a user would (upload, render, read back, torch tensors),
 and through gsplat 1.5.3's pure-PyTorch 2DGS path (``../shared/bench/peer_gsplat_torch.py``), both at
 torch's default thread count. Runs alternate (GMA, peer, GMA, peer, ...) so that a machine whose speed
-drifts affects both sides alike. Prints medians and the ratios.
+drifts affects both sides alike. Prints medians and the ratios. ``--baseline DIR`` also times another
+GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a worker process, interleaved the same
+way, so that a speed-up over our own earlier code is a ratio from one run too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
-    python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--json out.json]
+    python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--baseline DIR] [--json out.json]
 """
 
 from __future__ import annotations
@@ -14,7 +16,9 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -74,11 +78,57 @@ def timed(fn, *args) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
+class Baseline:
+    """Another checkout's GMA in a worker process (this script with ``--worker``, its ``gma`` imported from
+    that checkout): each request times one step there."""
+
+    def __init__(self, root: str, n: int):
+        self.root = Path(root).resolve()
+        if not (self.root / "gma" / "__init__.py").is_file():
+            raise SystemExit(f"--baseline {root}: not a GMA checkout (no gma/__init__.py)")
+        env = dict(os.environ, PYTHONPATH=str(self.root))
+        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(n)], cwd=self.root, env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        ready = self.proc.stdout.readline().strip()
+        if not ready.startswith("ready"):
+            raise SystemExit(f"--baseline {root}: the worker did not start ({ready!r})")
+
+    def step(self, backward: bool) -> float:
+        self.proc.stdin.write("bwd\n" if backward else "fwd\n")
+        self.proc.stdin.flush()
+        return float(self.proc.stdout.readline())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def worker(n: int) -> int:
+    """The baseline side: time one GMA step per request on stdin ("fwd" / "bwd"), print its ms."""
+    import gma
+
+    root = Path(os.environ["PYTHONPATH"]).resolve()
+    if not Path(gma.__file__).resolve().is_relative_to(root):
+        print(f"error: gma imported from {gma.__file__}, not {root}", flush=True)
+        return 2
+    workload = load_standard_workload()
+    ctx = get_context()
+    t = scene_tensors(workload, n)
+    size = (workload.WIDTH, workload.HEIGHT)
+    print("ready", flush=True)
+    for line in sys.stdin:
+        print(f"{timed(gma_step, t, line.strip() == 'bwd', ctx, size):.3f}", flush=True)
+    return 0
+
+
 def main() -> int:
+    if len(sys.argv) == 3 and sys.argv[1] == "--worker":
+        return worker(int(sys.argv[2]))
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counts", type=int, nargs="+", default=[20_000, 100_000])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--no-peer", action="store_true", help="time GMA only")
+    ap.add_argument("--baseline", help="another GMA checkout to time beside this one (a worker process)")
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     workload = load_standard_workload()
@@ -89,25 +139,35 @@ def main() -> int:
     ctx = get_context()
     size = (workload.WIDTH, workload.HEIGHT)
     print(f"adapter: {ctx.name}; machine: {machine()}; torch threads: {torch.get_num_threads()}")
-    print(f"{'N':>7} {'pass':<17} {'GMA ms':>9} {'peer ms':>9} {'ratio':>7}")
+    print(f"{'N':>7} {'pass':<17} {'GMA ms':>9} {'peer ms':>9} {'ratio':>7}"
+          + (f" {'baseline ms':>12} {'GMA/baseline':>13}" if args.baseline else ""))
     rows = []
     for n in args.counts:
         t = scene_tensors(workload, n)
+        base = Baseline(args.baseline, n) if args.baseline else None
         for backward in (False, True):
             gma_step(t, backward, ctx, size)  # warm-up: pipelines, capacity
             if render:
                 peer_step(render, t, backward, size)
-            gma, peer = [], []
+            if base:
+                base.step(backward)
+            gma, peer, baseline = [], [], []
             for _ in range(args.repeats):
                 gma.append(timed(gma_step, t, backward, ctx, size))
+                if base:
+                    baseline.append(base.step(backward))
                 if render:
                     peer.append(timed(peer_step, render, t, backward, size))
             g = statistics.median(gma)
             p = statistics.median(peer) if peer else float("nan")
+            b = statistics.median(baseline) if baseline else float("nan")
             name = "forward+backward" if backward else "forward"
-            print(f"{n:>7} {name:<17} {g:9.1f} {p:9.1f} {p / g:6.1f}x")
+            print(f"{n:>7} {name:<17} {g:9.1f} {p:9.1f} {p / g:6.1f}x"
+                  + (f" {b:12.1f} {g / b:13.2f}" if base else ""))
             rows.append({"n": n, "pass": name, "gma_ms": g, "peer_ms": p, "ratio": p / g, "gma_runs": gma,
-                         "peer_runs": peer})
+                         "peer_runs": peer, "baseline_ms": b, "baseline_runs": baseline})
+        if base:
+            base.close()
     print(f"load after: {machine()}")
     if args.json:
         Path(args.json).write_text(json.dumps({"adapter": ctx.name, "machine": machine(), "rows": rows}, indent=1))
