@@ -376,10 +376,11 @@ class ViewerWindow:
         """The frame loop, until the window is closed."""
         try:
             while not self.should_close:
-                if self.idle:
-                    # Nothing to redraw: sleep until input arrives (a background solve is polled 20 times
-                    # a second), so an idle window leaves the cores to the edit solves and other work.
-                    glfw.wait_events_timeout(0.05)
+                if self.last_quality is None:
+                    # Nothing to redraw: sleep until input arrives, so that a still window leaves the cores
+                    # to the edit solves and other work (a running solve or stroke is polled 100 times a
+                    # second, an idle window 20 times).
+                    glfw.wait_events_timeout(0.05 if self.idle else 0.01)
                 self.draw_frame()
                 if self.stats.frame % 60 == 0:
                     self._stats_text = f"{self.stats.summary()} | {self.quality.quality.label()}"
