@@ -105,6 +105,18 @@ fn flush(sid: u32, g: SurfelGrad) {
 var<workgroup> batch_ids: array<u32, BATCH>;
 var<workgroup> tile_last: atomic<u32>;
 
+// Intersections of the tile (`range`) to replay: up to the furthest last contributor of any of its
+// pixels (`last`: this thread's), as batches behind every pixel's last contributor need no replay.
+// Uniform across the workgroup; call from uniform control flow (barriers).
+fn replay_count(range: vec2<u32>, lid: u32, last: u32) -> u32 {
+    if lid == 0u {
+        atomicStore(&tile_last, 0u);
+    }
+    workgroupBarrier();
+    atomicMax(&tile_last, last);
+    return min(range.y - range.x, workgroupUniformLoad(&tile_last));
+}
+
 // Up to 4 channels as a zero-padded vec4 (no private arrays; see the subgroup path below).
 fn upstream_color4(p: u32) -> vec4<f32> {
     let base = p * CHANNELS;
@@ -202,13 +214,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let last = max(max(pa.last, pb.last), max(pc.last, pd.last));
 
     let range = ranges[tile];
-    if lid == 0u {
-        atomicStore(&tile_last, 0u);
-    }
-    workgroupBarrier();
-    atomicMax(&tile_last, last);
-    // Batches behind every pixel's last contributor need no replay.
-    let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
+    let count = replay_count(range, lid, last);
     let num_batches = ceil_div(count, BATCH);
     let tile_px = pix % TILE_SIZE;
     let my_blocks = subgroupOr(quad_blocks(tile_px));
@@ -318,13 +324,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var acc_nd = vec4<f32>(0.0);
 
     let range = ranges[tile];
-    if lid == 0u {
-        atomicStore(&tile_last, 0u);
-    }
-    workgroupBarrier();
-    atomicMax(&tile_last, last);
-    // Batches behind every pixel's last contributor need no replay.
-    let count = min(range.y - range.x, workgroupUniformLoad(&tile_last));
+    let count = replay_count(range, lid, last);
     let num_batches = ceil_div(count, BATCH);
     // Only the intersections before the tile's furthest last contributor matter.
     for (var bi = 0u; bi < num_batches; bi++) {
