@@ -46,3 +46,16 @@ def anny_body():
     from gma.body import load_body
 
     return load_body("anny")
+
+
+@pytest.fixture()
+def empty_room_clip(tmp_path):
+    """A 4-frame 64×64 mp4 of grey noise: a video with nobody in it (the video tests' "no person" case)."""
+    import imageio.v3 as iio
+    import numpy as np
+
+    clip = tmp_path / "empty_room.mp4"
+    rng = np.random.default_rng(0)
+    frames = np.clip(120 + rng.normal(0, 3, (4, 64, 64, 3)), 0, 255).astype(np.uint8)
+    iio.imwrite(clip, frames, fps=5, codec="libx264", macro_block_size=16)
+    return clip

@@ -234,16 +234,11 @@ def test_camera_file_undistorts_and_scales(tmp_path, synth_clip, anny_body):
     assert fixed - floor < 0.35 * (as_seen - floor), (fixed, as_seen, floor)
 
 
-def test_no_person_is_a_clear_error(tmp_path):
+def test_no_person_is_a_clear_error(tmp_path, empty_room_clip):
     pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
-    import imageio.v3 as iio
-
     from gma.video import estimate_sequence
 
-    clip = tmp_path / "empty_room.mp4"
-    rng = np.random.default_rng(0)
-    frames = np.clip(120 + rng.normal(0, 3, (4, 64, 64, 3)), 0, 255).astype(np.uint8)
-    iio.imwrite(clip, frames, fps=5, codec="libx264", macro_block_size=16)
+    clip = empty_room_clip
     with pytest.raises(ValueError, match="no person detected"):
         estimate_sequence(clip, tmp_path / "seq", progress=False)
 
