@@ -9,7 +9,7 @@ from gma.gpu import GpuContext
 from gma.gpu.workspace import Workspace
 
 SORT_BLOCK = 2048  # keys per workgroup; mirrors shaders/wgsl/common/sort_types.wgsl
-RADIX_BITS = 4  # digit width; the shaders (sort/radix_digits.wgsl) pack per-digit counts for 4 bits
+RADIX_BITS = 4  # digit width; mirrors shaders/wgsl/sort/radix_digits.wgsl (whose counters are packed for 4 bits)
 
 
 def sort_blocks(count: int) -> int:
@@ -42,10 +42,9 @@ class RadixSorter:
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
-        digits = [{"RADIX_BITS": RADIX_BITS, "SHIFT": RADIX_BITS * i} for i in range(passes)]
-        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", d) for d in digits]
-        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"RADIX_BITS": RADIX_BITS, "SHIFT": 0})
-        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", d) for d in digits]
+        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0})
+        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])
         for i in range(passes):
             cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)

@@ -1,4 +1,4 @@
-// Digits of the radix sort and a thread's per-digit key counts. Defines: RADIX_BITS (4), SHIFT.
+// Digits of the radix sort and a thread's per-digit key counts. Define: SHIFT (the digit's lowest bit).
 //
 // A thread counts the digits of its SORT_ITEMS keys in registers, one byte per digit (counts reach at
 // most SORT_ITEMS = 16) packed into a vec4<u32> and updated with selects. Before, a private array indexed
@@ -7,6 +7,7 @@
 // one pass fewer for both of the renderer's sorts, with counts packed in two vec4s, were slower: 15.8 ms
 // for either, against 11.7 and 12.7 with 4 bits: the per-thread work per digit, the histogram atomics
 // and the per-digit scans, doubles.)
+const RADIX_BITS: u32 = 4u;   // mirrored by gma/render/gpu_sort.py
 const RADIX: u32 = 1u << RADIX_BITS;
 
 fn key_digit(key: u32) -> u32 {
