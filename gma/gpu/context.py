@@ -39,6 +39,7 @@ RAISED_LIMITS = (
 )
 
 STORAGE = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST
+STAGING_KEEP_BYTES = 64 << 20  # read_many keeps its staging buffer for reuse up to this size
 
 
 @dataclass
@@ -201,20 +202,26 @@ class GpuContext:
         total = int(offsets[-1])
         if total == 0:
             return [np.zeros(0, dtype) for _, dtype, _ in items]
-        staging = self.device.create_buffer(label="read_many", size=total,
-                                            usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST)
-        enc = self.device.create_command_encoder()
-        for (buf, _, _), off, n in zip(items, offsets, sizes):
-            if n:
-                enc.copy_buffer_to_buffer(buf, 0, staging, int(off), (n + 3) // 4 * 4)
         # Wait for queued work first, so that the transfer timing counts the copy and not the compute.
         self.wait_idle()
-        with self.transfers.download(total):
+        with _staging_lock, self.transfers.download(total):
+            # Kept and reused up to 64 MiB: a fresh multi-megabyte staging buffer per read costs lavapipe
+            # an allocation, its page faults and wgpu's zero-fill.
+            staging = getattr(self, "_staging", None)
+            if staging is None or staging.size < total:
+                staging = self.device.create_buffer(label="read_many", size=total,
+                                                    usage=wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST)
+                if total <= STAGING_KEEP_BYTES:
+                    self._staging = staging
+            enc = self.device.create_command_encoder()
+            for (buf, _, _), off, n in zip(items, offsets, sizes):
+                if n:
+                    enc.copy_buffer_to_buffer(buf, 0, staging, int(off), (n + 3) // 4 * 4)
             self.device.queue.submit([enc.finish()])
-            staging.map_sync(wgpu.MapMode.READ)
-            raw = np.frombuffer(staging.read_mapped(), np.uint8).copy()
+            staging.map_sync(wgpu.MapMode.READ, 0, total)
+            # One copy out of the mapping (read_mapped's default would make one more).
+            raw = np.frombuffer(staging.read_mapped(0, total, copy=False), np.uint8).copy()
             staging.unmap()
-        staging.destroy()
         return [raw[off:off + n].view(np.dtype(dtype)) for (_, dtype, _), off, n in zip(items, offsets, sizes)]
 
     def wait_idle(self) -> None:
@@ -230,6 +237,7 @@ class GpuContext:
 
 
 _shared: GpuContext | None = None
+_staging_lock = threading.Lock()  # read_many's staging buffer is reused: one read at a time
 _shared_lock = threading.Lock()
 
 

@@ -1,4 +1,4 @@
-"""Stable GPU radix sort of u32 keys with u32 values (4-bit digits, count/scan/scatter per digit)."""
+"""Stable GPU radix sort of u32 keys with u32 values (RADIX_BITS-bit digits, count/scan/scatter per digit)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from gma.gpu import GpuContext
 from gma.gpu.workspace import Workspace
 
 SORT_BLOCK = 2048  # keys per workgroup; mirrors shaders/wgsl/common/sort_types.wgsl
-RADIX_BITS = 4
+RADIX_BITS = 4  # digit width; mirrors shaders/wgsl/sort/radix_digits.wgsl (whose counters are packed for 4 bits)
 
 
 def sort_blocks(count: int) -> int:
@@ -38,13 +38,13 @@ class RadixSorter:
         """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside)."""
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
-        hist = self.workspace.get("sort.hist", 16 * 4 * sort_blocks(capacity))
+        hist = self.workspace.get("sort.hist", (4 << RADIX_BITS) * sort_blocks(capacity))
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
-        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4 * i}) for i in range(passes)]
-        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl")
-        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": 4 * i}) for i in range(passes)]
+        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0})
+        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])
         for i in range(passes):
             cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)

@@ -25,59 +25,25 @@ struct SurfelGrad {
     v_nd: vec4<f32>,     // normal (xyz), depth (w)
 }
 
-// The quantities of one surfel's alpha at one pixel that its gradient reuses (renderer contract,
-// steps 2-3). Computed once per hit: the replay needs alpha before it knows the gradient's scale.
-struct AlphaEval {
-    h_u: vec3<f32>,
-    h_v: vec3<f32>,
-    p: vec3<f32>,
-    uv: vec2<f32>,
-    d: vec2<f32>,
-    e: f32,           // exp(-sigma)
-    raw: f32,         // opacity * e, before the clamp
-    use_3d: bool,     // sigma came from the ray-splat intersection (else from the 2D distance)
+// d alpha / d(p, mu2d, opacity) scaled by v_alpha, from an alpha evaluation (alpha_from() in
+// rasterize_core.wgsl; the gradient reuses its terms). Branch-free for the subgroup path: zero where the
+// alpha was clamped (it no longer depends on the surfel), v_p zero where sigma came from the 2D distance.
+struct AlphaGrad {
+    v_p: vec3<f32>,
+    v_mu2d: vec2<f32>,
+    v_opacity: f32,
 }
 
-// Same arithmetic as surfel_alpha() in rasterize_core.wgsl, so alpha matches the forward bit for bit.
-fn eval_alpha(s: ProjectedSurfel, px: vec2<f32>) -> AlphaEval {
-    var a: AlphaEval;
-    a.h_u = px.x * s.t2.xyz - s.t0.xyz;
-    a.h_v = px.y * s.t2.xyz - s.t1.xyz;
-    a.p = cross(a.h_u, a.h_v);
-    a.d = px - vec2<f32>(s.t0.w, s.t1.w);
-    let sigma_2d = dot(a.d, a.d);
-    var sigma = sigma_2d;
-    a.use_3d = false;
-    a.uv = vec2<f32>(0.0);
-    if a.p.z != 0.0 {
-        a.uv = a.p.xy / a.p.z;
-        let sigma_3d = 0.5 * dot(a.uv, a.uv);
-        a.use_3d = sigma_3d <= sigma_2d;
-        sigma = min(sigma, sigma_3d);
-    }
-    a.e = exp(-sigma);
-    a.raw = s.t2.w * a.e;
-    return a;
-}
-
-// d alpha / d(T, mu2d, opacity) scaled by v_alpha, from the evaluation above.
-fn alpha_backward(a: AlphaEval, px: vec2<f32>, v_alpha: f32, g: ptr<function, SurfelGrad>) {
-    if a.raw >= MAX_ALPHA {
-        return;  // clamped: alpha no longer depends on the surfel
-    }
-    (*g).v_opacity += v_alpha * a.e;
+fn alpha_backward(a: AlphaEval, v_alpha_in: f32) -> AlphaGrad {
+    let v_alpha = select(0.0, v_alpha_in, a.raw < MAX_ALPHA);
     let v_sigma = -v_alpha * a.raw;
-    if a.use_3d {
-        let v_uv = v_sigma * a.uv;
-        let v_p = vec3<f32>(v_uv / a.p.z, -dot(v_uv, a.uv) / a.p.z);
-        let v_hu = cross(a.h_v, v_p);
-        let v_hv = cross(v_p, a.h_u);
-        (*g).v_t0 -= v_hu;
-        (*g).v_t1 -= v_hv;
-        (*g).v_t2 += px.x * v_hu + px.y * v_hv;
-    } else {
-        (*g).v_mu2d += -2.0 * v_sigma * a.d;
-    }
+    // sigma_3d = |uv|^2 / 2 with uv = p.xy / p.z: d sigma / dp = (uv, -|uv|^2) / p.z.
+    let f = v_sigma * a.inv_pz;
+    var g: AlphaGrad;
+    g.v_p = select(vec3<f32>(0.0), vec3<f32>(f * a.uv, -f * dot(a.uv, a.uv)), a.use_3d);
+    g.v_mu2d = select(-2.0 * v_sigma * a.d, vec2<f32>(0.0), a.use_3d);
+    g.v_opacity = v_alpha * a.e;
+    return g;
 }
 
 fn flush(sid: u32, g: SurfelGrad) {
@@ -178,11 +144,21 @@ fn start_replay(pix: vec2<u32>) -> PixelReplay {
     return r;
 }
 
-// Step pixel `r` back over surfel `s` (colour `col`, local intersection index `idx`): adds the pixel's
-// gradient to `g` and returns its colour gradient; `hit` says whether the surfel contributed.
-fn replay_hit(s: ProjectedSurfel, col: vec4<f32>, idx: u32, r: ptr<function, PixelReplay>,
-              g: ptr<function, SurfelGrad>, hit: ptr<function, bool>) -> vec4<f32> {
-    let ae = eval_alpha(s, (*r).px);
+// A surfel's gradient summed over a thread's four pixels, with the ray-transform part still as d/dp
+// (see main: the T rows' gradient is formed once per thread from these sums).
+struct QuadGrad {
+    v_p: vec3<f32>,      // sum over the pixels of d loss / dp
+    v_p_dy: vec3<f32>,   // the same, each pixel's weighted by its row offset dy from the first pixel
+    v_mu2d: vec2<f32>,
+    v_opacity: f32,
+    v_nd: vec4<f32>,
+}
+
+// Step pixel `r` (the thread's pixel k, 0-3) back over a surfel with alpha terms `ae`, normal and depth
+// `nd`, colour `col`, local intersection index `idx`: adds the pixel's gradient to `q` and returns its
+// colour gradient; `hit` says whether the surfel contributed.
+fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r: ptr<function, PixelReplay>,
+              q: ptr<function, QuadGrad>, hit: ptr<function, bool>) -> vec4<f32> {
     let alpha = min(MAX_ALPHA, ae.raw);
     let contrib = idx < (*r).last && alpha >= ALPHA_THRESHOLD;
     let ra = 1.0 / (1.0 - alpha);
@@ -190,11 +166,17 @@ fn replay_hit(s: ProjectedSurfel, col: vec4<f32>, idx: u32, r: ptr<function, Pix
     let w = select(0.0, alpha * T_i, contrib);
     var v_alpha = dot((*r).v_col, T_i * col - (*r).acc_col * ra) + (*r).v_a * (T_i - (*r).acc_a * ra);
 #if NORMAL_DEPTH_GRADS
-    v_alpha += dot((*r).v_nd, T_i * s.normal_depth - (*r).acc_nd * ra);
-    (*g).v_nd += w * (*r).v_nd;
-    (*r).acc_nd += w * s.normal_depth;
+    v_alpha += dot((*r).v_nd, T_i * nd - (*r).acc_nd * ra);
+    (*q).v_nd += w * (*r).v_nd;
+    (*r).acc_nd += w * nd;
 #endif
-    alpha_backward(ae, (*r).px, select(0.0, v_alpha, contrib), g);
+    let ag = alpha_backward(ae, select(0.0, v_alpha, contrib));
+    (*q).v_p += ag.v_p;
+    if k != 0u {   // constant after inlining
+        (*q).v_p_dy += f32(k * ROW_STEP.y) * ag.v_p;
+    }
+    (*q).v_mu2d += ag.v_mu2d;
+    (*q).v_opacity += ag.v_opacity;
     (*r).acc_col += w * col;
     (*r).acc_a += w;
     (*r).T = select((*r).T, T_i, contrib);
@@ -256,20 +238,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
-                var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
+                var q = QuadGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
                 var hit_a = false;
                 var hit_b = false;
                 var hit_c = false;
                 var hit_d = false;
-                let g_col = replay_hit(s, col, idx, &pa, &g, &hit_a) + replay_hit(s, col, idx, &pb, &g, &hit_b)
-                          + replay_hit(s, col, idx, &pc, &g, &hit_c) + replay_hit(s, col, idx, &pd, &g, &hit_d);
+                let ca = column_alpha(s, pa.px);   // the forward's alpha arithmetic (composite_quad)
+                let g_col = replay_hit(quad_alpha(s, ca, 0u), 0u, nd, col, idx, &pa, &q, &hit_a)
+                          + replay_hit(quad_alpha(s, ca, 1u), 1u, nd, col, idx, &pb, &q, &hit_b)
+                          + replay_hit(quad_alpha(s, ca, 2u), 2u, nd, col, idx, &pc, &q, &hit_c)
+                          + replay_hit(quad_alpha(s, ca, 3u), 3u, nd, col, idx, &pd, &q, &hit_d);
                 if subgroupAny(hit_a || hit_b || hit_c || hit_d) {
+                    // d/dT of the four pixels at once. Per pixel (p = h_u x h_v): d/dh_u = h_v x v_p,
+                    // d/dh_v = v_p x h_u, and T0 -= d/dh_u, T1 -= d/dh_v, T2 += px.x d/dh_u + px.y d/dh_v.
+                    // h_u is common and h_v = h_v0 + dy T2, so the sums over the pixels need only the
+                    // sums of v_p and of dy v_p: four cross products per thread instead of two per pixel.
+                    let s_hu = cross(ca.h_v, q.v_p) + cross(s.t2.xyz, q.v_p_dy);
+                    let s_hv = cross(q.v_p, ca.h_u);
+                    let v_t2 = pa.px.x * s_hu + pa.px.y * s_hv + cross(q.v_p_dy, ca.h_u);
                     // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
                     // log2(SG) xor-shuffles of packed vec4s.
-                    var a = vec4<f32>(g.v_t0, g.v_opacity);
-                    var b = vec4<f32>(g.v_t1, g.v_mu2d.x);
-                    var c = vec4<f32>(g.v_t2, g.v_mu2d.y);
-                    var d = g.v_nd;
+                    var a = vec4<f32>(-s_hu, q.v_opacity);
+                    var b = vec4<f32>(-s_hv, q.v_mu2d.x);
+                    var c = vec4<f32>(v_t2, q.v_mu2d.y);
+                    var d = q.v_nd;
                     var e = g_col;
                     for (var off = SG / 2u; off > 0u; off >>= 1u) {
                         a += subgroupShuffleXor(a, off);
@@ -345,7 +337,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 continue;
             }
             let s = batch_surf[j];
-            let ae = eval_alpha(s, px);
+            // surfel_alpha() of the forward, keeping the terms the gradient needs.
+            let h_u = px.x * s.t2.xyz - s.t0.xyz;
+            let h_v = px.y * s.t2.xyz - s.t1.xyz;
+            let ae = alpha_from(s, cross(h_u, h_v), px - vec2<f32>(s.t0.w, s.t1.w));
             let alpha = min(MAX_ALPHA, ae.raw);
             if alpha < ALPHA_THRESHOLD {
                 continue;
@@ -367,7 +362,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
             var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-            alpha_backward(ae, px, v_alpha, &g);
+            let ag = alpha_backward(ae, v_alpha);
+            let v_hu = cross(h_v, ag.v_p);
+            let v_hv = cross(ag.v_p, h_u);
+            g.v_t0 = -v_hu;
+            g.v_t1 = -v_hv;
+            g.v_t2 = px.x * v_hu + px.y * v_hv;
+            g.v_mu2d = ag.v_mu2d;
+            g.v_opacity = ag.v_opacity;
             g.v_nd = w * v_nd;
             flush(sid, g);
             acc_a += w;

@@ -3,6 +3,7 @@
 // every block's output offset for every digit.
 #include "common/render_types.wgsl"
 #include "common/sort_types.wgsl"
+#include "sort/radix_digits.wgsl"
 
 @group(0) @binding(0) var<storage, read> info: DispatchInfo;   // groups_x = num_blocks, count = keys
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
@@ -19,17 +20,17 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let count = info.count;
     let block = wg.x;
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
-    var local: array<u32, RADIX>;
+    var counts = vec4<u32>(0u);   // per digit (radix_digits.wgsl)
     for (var i = 0u; i < SORT_ITEMS; i++) {
         let idx = start + i;
         if idx < count {
-            let digit = (keys[idx] >> SHIFT) & (RADIX - 1u);
-            local[digit] += 1u;
+            add_digit(&counts, key_digit(keys[idx]));
         }
     }
     for (var d = 0u; d < RADIX; d++) {
-        if local[d] != 0u {
-            atomicAdd(&block_hist[d], local[d]);
+        let n = digit_count(counts, d);
+        if n != 0u {
+            atomicAdd(&block_hist[d], n);
         }
     }
     workgroupBarrier();

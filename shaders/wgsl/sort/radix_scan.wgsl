@@ -1,6 +1,7 @@
 // Radix sort, pass 2 of 3: exclusive scan of the digit-major histogram in place (one workgroup).
 #include "common/render_types.wgsl"
 #include "common/sort_types.wgsl"
+#include "sort/radix_digits.wgsl"
 
 @group(0) @binding(0) var<storage, read> info: DispatchInfo;
 @group(0) @binding(1) var<storage, read_write> hist: array<u32>;

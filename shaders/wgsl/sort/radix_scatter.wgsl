@@ -2,6 +2,7 @@
 // a key's rank is (keys of the same digit owned by earlier threads) + (earlier keys of the same thread).
 #include "common/render_types.wgsl"
 #include "common/sort_types.wgsl"
+#include "sort/radix_digits.wgsl"
 
 @group(0) @binding(0) var<storage, read> info: DispatchInfo;
 @group(0) @binding(1) var<storage, read> hist: array<u32>;       // scanned: output offsets
@@ -12,20 +13,28 @@
 
 var<workgroup> offsets: array<u32, 2048>;   // [RADIX][SORT_WG]: per digit, per thread
 
+// This thread's first output positions for digits 4w .. 4w + 3 (read into registers once, so that each
+// key picks its digit's by selects).
+fn bases_of(lid: u32, w: u32) -> vec4<u32> {
+    let d = 4u * w;
+    return vec4<u32>(offsets[d * SORT_WG + lid], offsets[(d + 1u) * SORT_WG + lid],
+                     offsets[(d + 2u) * SORT_WG + lid], offsets[(d + 3u) * SORT_WG + lid]);
+}
+
 @compute @workgroup_size(SORT_WG)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let count = info.count;
     let block = wg.x;
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
-    var local: array<u32, RADIX>;
+    var counts = vec4<u32>(0u);   // per digit (radix_digits.wgsl)
     for (var i = 0u; i < SORT_ITEMS; i++) {
         let idx = start + i;
         if idx < count {
-            local[(keys_in[idx] >> SHIFT) & (RADIX - 1u)] += 1u;
+            add_digit(&counts, key_digit(keys_in[idx]));
         }
     }
     for (var d = 0u; d < RADIX; d++) {
-        offsets[d * SORT_WG + lid] = local[d];
+        offsets[d * SORT_WG + lid] = digit_count(counts, d);
     }
     workgroupBarrier();
     if lid < RADIX {
@@ -38,16 +47,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         }
     }
     workgroupBarrier();
-    for (var d = 0u; d < RADIX; d++) {
-        local[d] = offsets[d * SORT_WG + lid];
-    }
+    let b0 = bases_of(lid, 0u);
+    let b1 = bases_of(lid, 1u);
+    let b2 = bases_of(lid, 2u);
+    let b3 = bases_of(lid, 3u);
+    var seen = vec4<u32>(0u);   // this thread's earlier keys, per digit
     for (var i = 0u; i < SORT_ITEMS; i++) {
         let idx = start + i;
         if idx < count {
             let key = keys_in[idx];
-            let digit = (key >> SHIFT) & (RADIX - 1u);
-            let pos = local[digit];
-            local[digit] = pos + 1u;
+            let digit = key_digit(key);
+            let w = digit >> 2u;
+            let bases = select(select(b0, b1, (w & 1u) != 0u), select(b2, b3, (w & 1u) != 0u), (w & 2u) != 0u);
+            let pos = pick4(bases, digit) + digit_count(seen, digit);
+            add_digit(&seen, digit);
             keys_out[pos] = key;
             vals_out[pos] = vals_in[idx];
         }
