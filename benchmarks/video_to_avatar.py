@@ -10,7 +10,7 @@ held-out frames without refinement, with refinement in the fit, and with test-ti
 a before/after picture (``--figure``, default docs/iper_pose_refinement.png).
 
     python benchmarks/video_to_avatar.py [--work /tmp/gma-v2a] [--frames 40] [--size 256]
-                                         [--refine-steps 20] [--skip-synth] [--skip-iper]
+                                         [--refine-steps 60] [--skip-synth] [--skip-iper]
 
 Everything lands in ``--work`` and is reused on a second run (fits resume from their checkpoints), so
 an interrupted run continues. Needs MediaPipe (``pip install 'gma[video]'``) and a wgpu adapter.
@@ -219,7 +219,7 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="/tmp/gma-v2a", help="work folder (reused by a second run)")
     ap.add_argument("--frames", type=int, default=40, help="training frames of the synthetic turn")
     ap.add_argument("--size", type=int, default=256, help="synthetic image size")
-    ap.add_argument("--refine-steps", type=int, default=20, help="test-time pose fitting steps per frame")
+    ap.add_argument("--refine-steps", type=int, default=60, help="test-time pose fitting steps per frame")
     ap.add_argument("--figure", default=str(REPO / "docs" / "iper_pose_refinement.png"))
     ap.add_argument("--skip-synth", action="store_true")
     ap.add_argument("--skip-iper", action="store_true")
