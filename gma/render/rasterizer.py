@@ -97,13 +97,14 @@ class SurfelRasterizer:
     def raster_defines(self, channels: int) -> dict:
         """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel,
         4 B of surfel id in the backward, 16 B per 4 channels, and for the subgroup path 4 B of block
-        mask plus a 4 B hit-list entry per subgroup), and the subgroup path on CPU adapters (see
-        rasterize_core.wgsl)."""
+        mask plus a 4 B hit-list entry per subgroup, and SG entries of scratch per subgroup), and the
+        subgroup path on CPU adapters (see rasterize_core.wgsl)."""
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
         sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
         per_surfel = 68 + 16 * ((channels + 3) // 4) + (4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 0)
         batch = 256
-        while batch > 32 and batch * per_surfel + 64 > limit:
+        fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
+        while batch > 32 and batch * per_surfel + fixed > limit:
             batch //= 2
         defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1}
         if sg:
