@@ -17,8 +17,9 @@
 // What the rasterizers' subgroup variant stages per intersection, precomputed here once per surfel (see
 // stage_surfel in rasterize_core.wgsl): the pixel rectangle in 4x2 pixel blocks, packed (lo.x | lo.y << 16,
 // hi.x | hi.y << 16; images are at most 65535 pixels a side), and the first four colour channels as one
-// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, same run against staging the float bounds with
-// a row loop and the colours as scalars: forward rasterize -4.5 %, backward -4 %, projection +0.4 ms.)
+// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the float bounds with a row
+// loop and the colours as scalars, four same-run comparisons: forward rasterize -3 to -4.5 %, backward -1
+// to -4 % in three and +7 % in one (noise under load), projection +0.4 to +0.7 ms, about +16 %.)
 @group(0) @binding(10) var<storage, read_write> block_rects: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]

@@ -26,7 +26,10 @@ var<workgroup> hit_slots: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 // `limit` into hit_slots[row..]; returns their number (uniform over the subgroup). Every lane stores,
 // the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
 // divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
-// the store (standard scene, 100k surfels, same run: forward rasterize -8 %, backward -5 %).
+// the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
+// -8 to -10 %, backward -2 to -5 %). Tried and no faster: per-subgroup hit bitsets built while staging
+// (ballots or xor-shuffles) so that listing reads a word per SG slots at a uniform address; the build
+// cost what the gathers saved.
 fn list_hits(m: u32, blocks: u32, limit: u32, row: u32, sg_lane: u32) -> u32 {
     var count = 0u;
     for (var j = 0u; j < m; j += SG) {
