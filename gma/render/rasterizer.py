@@ -26,6 +26,7 @@ from gma.render.surfels import SurfelBuffers
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
 MAX_WORKGROUPS = 65535
+MAX_IMAGE_SIDE = 65535  # project_fwd.wgsl packs 4x2-block coordinates in 16 bits (rasterize() already caps at 16384)
 DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
 RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
 
@@ -37,7 +38,8 @@ class ProjectionState:
     params: wgpu.GPUBuffer        # RenderParams uniform
     projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
-    pixel_bounds: wgpu.GPUBuffer  # [N] vec4<f32> screen bounds of alpha >= 1/255
+    block_rects: wgpu.GPUBuffer   # [N] vec2<u32> screen bounds of alpha >= 1/255 in 4x2 pixel blocks
+    colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
     depth_order: wgpu.GPUBuffer   # [N] surfel ids, front to back
@@ -95,13 +97,16 @@ class SurfelRasterizer:
     def raster_defines(self, channels: int) -> dict:
         """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel,
         4 B of surfel id in the backward, 16 B per 4 channels, and for the subgroup path 4 B of block
-        mask plus a 4 B hit-list entry per subgroup), and the subgroup path on CPU adapters (see
-        rasterize_core.wgsl)."""
+        mask plus a 4 B hit-list entry per subgroup, and SG entries of scratch per subgroup), and the
+        subgroup path on CPU adapters (see rasterize_core.wgsl). On lavapipe (standard scene, 100k
+        surfels) BATCH 128 or 64 was slower than 256, and 512 or 1024 (forward reading hit surfels from
+        storage, so that they fit) no faster."""
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
         sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
         per_surfel = 68 + 16 * ((channels + 3) // 4) + (4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 0)
         batch = 256
-        while batch > 32 and batch * per_surfel + 64 > limit:
+        fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
+        while batch > 32 and batch * per_surfel + fixed > limit:
             batch //= 2
         defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1}
         if sg:
@@ -126,6 +131,9 @@ class SurfelRasterizer:
         ctx, n = self.ctx, surfels.count
         if n > MAX_WORKGROUPS * 256:
             raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
+        if max(camera.width, camera.height) > MAX_IMAGE_SIDE:
+            raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "
+                             f"{MAX_IMAGE_SIDE} pixels per side")
         params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
                                surfels.channels)
         scratch = self.workspace.get
@@ -137,7 +145,8 @@ class SurfelRasterizer:
             params=kept("params", params.nbytes, UNIFORM),
             projected=kept("projected", 64 * n),
             tile_rects=scratch("tile_rects", 16 * n),
-            pixel_bounds=kept("pixel_bounds", 16 * n),
+            block_rects=kept("block_rects", 8 * n),
+            colors4=kept("colors4", 16 * n),
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),
             depth_order=scratch("depth_order", 4 * n),
@@ -152,7 +161,8 @@ class SurfelRasterizer:
         p = ctx.compute_pipeline("render/project_fwd.wgsl")
         self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
-                                    st.depth_order, st.pixel_bounds], ((n + 255) // 256, 1, 1), "project", timer)
+                                    st.depth_order, st.block_rects, surfels.colors, st.colors4],
+                       ((n + 255) // 256, 1, 1), "project", timer)
         depth_info = scratch("depth_sort.info", 16, INDIRECT)
         ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
         self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, DEPTH_KEY_BITS, timer)
@@ -198,8 +208,10 @@ class SurfelRasterizer:
         else:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", defines)
             resources = dict(enumerate(inputs + list(target)))
-        if defines["USE_SUBGROUPS"]:
-            resources[14] = st.pixel_bounds if n else empty
+        if defines["USE_SUBGROUPS"]:  # stages the colours that projection padded (see rasterize_core.wgsl)
+            del resources[2]
+            resources[14] = st.block_rects if n else empty
+            resources[15] = st.colors4 if n else empty
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges
 
@@ -266,7 +278,9 @@ class SurfelRasterizer:
         resources.update(upstream)
         resources.update({12: v_proj, 13: v_colors})
         if defines["USE_SUBGROUPS"]:
-            resources[14] = state.proj.pixel_bounds
+            del resources[2]
+            resources[14] = state.proj.block_rects
+            resources[15] = state.proj.colors4
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [ctx.buffer(4 * k * n, name) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                            ("v_opacities", 1))]

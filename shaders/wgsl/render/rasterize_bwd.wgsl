@@ -201,20 +201,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let tile_px = pix % TILE_SIZE;
     let my_blocks = subgroupOr(quad_blocks(tile_px));
     let block_last = subgroupMax(last);
-    let row = sg_id * BATCH;
+    let row = sg_id * (BATCH + SG);
     for (var bi = 0u; bi < num_batches; bi++) {
         let b = num_batches - 1u - bi;
         let start = b * BATCH;   // local index of the batch's first intersection
         workgroupBarrier();
-        for (var slot = lid; slot < BATCH; slot += RASTER_THREADS) {
-            if start + slot < count {
-                let sid = isect_ids[range.x + start + slot];
-                batch_ids[slot] = sid;
-                stage_surfel(slot, sid, tile);
-            }
+        let m = min(BATCH, count - start);
+        for (var slot = lid; slot < m; slot += RASTER_THREADS) {
+            let sid = isect_ids[range.x + start + slot];
+            batch_ids[slot] = sid;
+            stage_surfel(slot, sid, tile);
         }
         workgroupBarrier();
-        let m = min(BATCH, count - start);
         // Surfels pass between lanes by shuffles (see rasterize_core.wgsl, which also explains the hit
         // list). Only slots before the subgroup's furthest last contributor matter.
         let num_hits = list_hits(m, my_blocks, select(0u, block_last - start, block_last > start), row, sg_lane);
