@@ -2,10 +2,12 @@
 """GMA against the comparison peer in one run (issue 15): the standard scene (../shared/bench), rendered
 through the public ``gma.render.rasterize`` call as a user would (upload, render, read back, torch tensors),
 and through gsplat 1.5.3's pure-PyTorch 2DGS path (``../shared/bench/peer_gsplat_torch.py``), both at
-torch's default thread count. Runs alternate (GMA, peer, GMA, peer, ...) so that a machine whose speed
-drifts affects both sides alike. Prints medians and the ratios. ``--baseline DIR`` also times another
-GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a worker process, interleaved the same
-way, so that a speed-up over our own earlier code is a ratio from one run too.
+torch's default thread count, each in its own process as a user would run them (GMA in a worker process:
+in the peer's process, torch's busy OpenMP workers made GMA's forward swing between 74 and 112 ms). Runs
+alternate (GMA, peer, GMA, peer, ...) so that a machine whose speed drifts affects both sides alike.
+Prints medians and the ratios. ``--baseline DIR`` also times another GMA checkout (e.g. ``git worktree
+add /tmp/base <commit>``) in a worker process, interleaved the same way, so that a speed-up over our own
+earlier code is a ratio from one run too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--baseline DIR] [--json out.json]
@@ -32,6 +34,7 @@ from gma.gpu import get_context  # noqa: E402
 from gma.render import rasterize  # noqa: E402
 
 PEER = SHARED_WORKLOAD.parent / "peer_gsplat_torch.py"
+REPO = Path(__file__).resolve().parents[1]
 
 
 def load_peer():
@@ -72,28 +75,35 @@ def peer_step(render, t: dict, backward: bool, size) -> None:
             img.mean().backward()
 
 
+# Pause before each timed step: torch's OpenMP workers keep spinning for a while after the peer's last
+# op, and the next step would pay for their cores.
+SETTLE_S = 0.3
+
+
 def timed(fn, *args) -> float:
+    time.sleep(SETTLE_S)
     t0 = time.perf_counter()
     fn(*args)
     return (time.perf_counter() - t0) * 1e3
 
 
-class Baseline:
-    """Another checkout's GMA in a worker process (this script with ``--worker``, its ``gma`` imported from
-    that checkout): each request times one step there."""
+class Worker:
+    """A checkout's GMA in a worker process (this script with ``--worker``, its ``gma`` imported from that
+    checkout): each request times one step there."""
 
-    def __init__(self, root: str, n: int):
+    def __init__(self, root: str | Path, n: int):
         self.root = Path(root).resolve()
         if not (self.root / "gma" / "__init__.py").is_file():
-            raise SystemExit(f"--baseline {root}: not a GMA checkout (no gma/__init__.py)")
+            raise SystemExit(f"{root}: not a GMA checkout (no gma/__init__.py)")
         env = dict(os.environ, PYTHONPATH=str(self.root))
         self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(n)], cwd=self.root, env=env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         ready = self.proc.stdout.readline().strip()
         if not ready.startswith("ready"):
-            raise SystemExit(f"--baseline {root}: the worker did not start ({ready!r})")
+            raise SystemExit(f"{root}: the worker did not start ({ready!r})")
 
     def step(self, backward: bool) -> float:
+        time.sleep(SETTLE_S)  # as in timed()
         self.proc.stdin.write("bwd\n" if backward else "fwd\n")
         self.proc.stdin.flush()
         return float(self.proc.stdout.readline())
@@ -144,16 +154,17 @@ def main() -> int:
     rows = []
     for n in args.counts:
         t = scene_tensors(workload, n)
-        base = Baseline(args.baseline, n) if args.baseline else None
+        ours = Worker(REPO, n)
+        base = Worker(args.baseline, n) if args.baseline else None
         for backward in (False, True):
-            gma_step(t, backward, ctx, size)  # warm-up: pipelines, capacity
+            ours.step(backward)  # warm-up: pipelines, capacity
             if render:
                 peer_step(render, t, backward, size)
             if base:
                 base.step(backward)
             gma, peer, baseline = [], [], []
             for _ in range(args.repeats):
-                gma.append(timed(gma_step, t, backward, ctx, size))
+                gma.append(ours.step(backward))
                 if base:
                     baseline.append(base.step(backward))
                 if render:
@@ -166,6 +177,7 @@ def main() -> int:
                   + (f" {b:12.1f} {g / b:13.2f}" if base else ""))
             rows.append({"n": n, "pass": name, "gma_ms": g, "peer_ms": p, "ratio": p / g, "gma_runs": gma,
                          "peer_runs": peer, "baseline_ms": b, "baseline_runs": baseline})
+        ours.close()
         if base:
             base.close()
     print(f"load after: {machine()}")
