@@ -278,13 +278,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     // adds, bit-identical gradients; standard scene, 100k surfels, same runs against the
                     // lane-0 flush: this pass -22 % (load 1.8-2.1). (An earlier spread, 401 against 372
                     // ms, predates the hit lists; how it picked the values is not recorded.)
+                    // Without normal and depth gradients their slots (12-15) carry the colour gradients
+                    // (copied out by project_bwd): 15 values in two rounds of adds instead of three
+                    // (this pass -4 to -8 %, standard scene, 100k surfels, same runs, load 0.9-1.4).
                     for (var i0 = 0u; i0 < PROJ_VALUES; i0 += SG) {
                         let i = i0 + sg_lane;
-                        let v = proj_component(i, a, b, c, d);
+                        var v = proj_component(i, a, b, c, d);
+#if !NORMAL_DEPTH_GRADS
+                        v = select(v, select(select(select(e.x, e.y, i == 13u), e.z, i == 14u), e.w, i == 15u),
+                                   i >= G_NORMAL);
+#endif
                         if i < PROJ_VALUES {
                             add_proj(sid * G_STRIDE + i, v);
                         }
                     }
+#if NORMAL_DEPTH_GRADS
                     for (var i0 = 0u; i0 < CHANNELS; i0 += SG) {
                         let i = i0 + sg_lane;
                         let v = select(select(select(e.x, e.y, i == 1u), e.z, i == 2u), e.w, i == 3u);
@@ -292,6 +300,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                             add_color(sid * CHANNELS + i, v);
                         }
                     }
+#endif
                 }
             }
         }
@@ -301,7 +310,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #if NORMAL_DEPTH_GRADS
 const PROJ_VALUES: u32 = 16u;
 #else
-const PROJ_VALUES: u32 = 12u;
+const PROJ_VALUES: u32 = 12u + CHANNELS;   // colour gradients in the normal and depth slots
 #endif
 
 // Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main).
