@@ -277,17 +277,23 @@ class SurfelRasterizer:
                                     state.tile_ranges, state.background, state.final_t, state.last]))
         resources.update(upstream)
         resources.update({12: v_proj, 13: v_colors})
+        # The subgroup variant without normal and depth gradients adds the colour gradients into their
+        # slots of v_proj (fewer rounds of atomics, see rasterize_bwd.wgsl); project_bwd copies them out.
+        color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         if defines["USE_SUBGROUPS"]:
             del resources[2]
             resources[14] = state.proj.block_rects
             resources[15] = state.proj.colors4
+        if color_in_proj:
+            del resources[13]
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [ctx.buffer(4 * k * n, name) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                            ("v_opacities", 1))]
-        proj = ctx.compute_pipeline("render/project_bwd.wgsl")
+        proj = ctx.compute_pipeline("render/project_bwd.wgsl",
+                                    {"COLOR_IN_PROJ": color_in_proj, "CHANNELS": c} if color_in_proj else None)
         self._dispatch(enc, proj, [state.proj.params, surfels.means, surfels.quats, surfels.scales,
-                                   state.proj.tile_counts, v_proj, *outs], ((n + 255) // 256, 1, 1),
-                       "project_bwd", timer)
+                                   state.proj.tile_counts, v_proj, *outs] + ([v_colors] if color_in_proj else []),
+                       ((n + 255) // 256, 1, 1), "project_bwd", timer)
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)

@@ -1,6 +1,8 @@
 // Projection backward: one thread per surfel. Chains the rasterizer's gradients with respect to the ray
 // transform T, the projected centre, the camera-space normal and the depth down to means, quaternions
 // and scales, by recomputing the forward projection (cheaper than storing its intermediates).
+// Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
+// the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
 
@@ -14,6 +16,9 @@
 @group(0) @binding(7) var<storage, read_write> v_quats: array<f32>;     // [N, 4]
 @group(0) @binding(8) var<storage, read_write> v_scales: array<f32>;    // [N, 2]
 @group(0) @binding(9) var<storage, read_write> v_opacities: array<f32>; // [N]
+#if COLOR_IN_PROJ
+@group(0) @binding(10) var<storage, read_write> v_colors: array<f32>;   // [N, CHANNELS]
+#endif
 
 // Gradient of R(q / |q|) with respect to q, given dL/dR (columns of v_r are dL/d(column)).
 fn quat_backward(q_in: vec4<f32>, v_r: mat3x3<f32>) -> vec4<f32> {
@@ -44,6 +49,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let g = i * 16u;
+#if COLOR_IN_PROJ
+    for (var c = 0u; c < CHANNELS; c++) {
+        v_colors[i * CHANNELS + c] = v_proj[g + 12u + c];
+    }
+#endif
     if tile_counts[i] == 0u {
         v_means[3u * i] = 0.0;
         v_means[3u * i + 1u] = 0.0;
@@ -85,8 +95,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var v_t1 = vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]);
     var v_t2 = vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]);
     let v_mu2d = vec2<f32>(v_proj[g + 9u], v_proj[g + 10u]);
+#if COLOR_IN_PROJ
+    let v_normal = vec3<f32>(0.0);
+    let v_depth = 0.0;
+#else
     let v_normal = vec3<f32>(v_proj[g + 12u], v_proj[g + 13u], v_proj[g + 14u]);
     let v_depth = v_proj[g + 15u];
+#endif
 
     // mu2d = (sum_j f_j T0j T2j, sum_j f_j T1j T2j), f = (1, 1, -1) / denom.
     v_t0 += v_mu2d.x * f * t2;

@@ -270,19 +270,68 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #endif
                         e += subgroupShuffleXor(e, off);
                     }
-                    let r = SurfelGrad(a.xyz, b.xyz, c.xyz, vec2<f32>(b.w, c.w), a.w, d);
-                    // One lane adds the totals. (Spreading the adds over the lanes, value i by lane i, was
-                    // slower on lavapipe: 401 against 372 ms for this pass at 100k surfels.)
-                    if sg_lane == 0u {  // every lane is active here: the skips above are subgroup-uniform
-                        flush(sid, r);
-                        for (var c = 0u; c < CHANNELS; c++) {
-                            add_color(sid * CHANNELS + c, e[c]);
+                    // Every lane holds the totals (butterfly); lane i adds value i, i + SG, ... Lavapipe
+                    // runs each atomic as a loop over the lanes, so one lane adding all 15-19 values paid
+                    // (as far as we can tell) that loop 8 times per value with one lane active; spread, each
+                    // loop does up to 8 adds.
+                    // Values are picked by selects (an indexed private array would go to scratch). Same
+                    // adds, bit-identical gradients; standard scene, 100k surfels, same runs against the
+                    // lane-0 flush: this pass -22 % (load 1.8-2.1). (An earlier spread, 401 against 372
+                    // ms, predates the hit lists; how it picked the values is not recorded.)
+                    // Without normal and depth gradients their slots (12-15) carry the colour gradients
+                    // (copied out by project_bwd): 15 values in two rounds of adds instead of three
+                    // (this pass -4 to -8 %, standard scene, 100k surfels, same runs, load 0.9-1.4).
+                    for (var i0 = 0u; i0 < PROJ_VALUES; i0 += SG) {
+                        let i = i0 + sg_lane;
+                        var v = proj_component(i, a, b, c, d);
+#if !NORMAL_DEPTH_GRADS
+                        v = select(v, select(select(select(e.x, e.y, i == 13u), e.z, i == 14u), e.w, i == 15u),
+                                   i >= G_NORMAL);
+#endif
+                        if i < PROJ_VALUES {
+                            add_proj(sid * G_STRIDE + i, v);
                         }
                     }
+#if NORMAL_DEPTH_GRADS
+                    for (var i0 = 0u; i0 < CHANNELS; i0 += SG) {
+                        let i = i0 + sg_lane;
+                        let v = select(select(select(e.x, e.y, i == 1u), e.z, i == 2u), e.w, i == 3u);
+                        if i < CHANNELS {
+                            add_color(sid * CHANNELS + i, v);
+                        }
+                    }
+#endif
                 }
             }
         }
     }
+}
+
+#if NORMAL_DEPTH_GRADS
+const PROJ_VALUES: u32 = 16u;
+#else
+const PROJ_VALUES: u32 = 12u + CHANNELS;   // colour gradients in the normal and depth slots
+#endif
+
+// Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main).
+fn proj_component(i: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> f32 {
+    var v = a.x;                      // G_T0
+    v = select(v, a.y, i == 1u);
+    v = select(v, a.z, i == 2u);
+    v = select(v, b.x, i == 3u);      // G_T1
+    v = select(v, b.y, i == 4u);
+    v = select(v, b.z, i == 5u);
+    v = select(v, c.x, i == 6u);      // G_T2
+    v = select(v, c.y, i == 7u);
+    v = select(v, c.z, i == 8u);
+    v = select(v, b.w, i == 9u);      // G_MU2D
+    v = select(v, c.w, i == 10u);
+    v = select(v, a.w, i == 11u);     // G_OPACITY
+    v = select(v, d.x, i == 12u);     // G_NORMAL
+    v = select(v, d.y, i == 13u);
+    v = select(v, d.z, i == 14u);
+    v = select(v, d.w, i == 15u);     // G_DEPTH
+    return v;
 }
 #else
 @compute @workgroup_size(256)
