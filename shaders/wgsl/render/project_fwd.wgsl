@@ -20,7 +20,7 @@
 // zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the float bounds with a row
 // loop and the colours as scalars, four same-run comparisons: forward rasterize -3 to -4.5 %, backward -1
 // to -4 % in three and +7 % in one (noise under load), projection +0.4 to +0.7 ms, about +16 %.)
-@group(0) @binding(10) var<storage, read_write> block_rects: array<vec2<u32>>;    // [N]
+@group(0) @binding(10) var<storage, read_write> block_shapes: array<BlockShape>;   // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
 
@@ -113,7 +113,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
     let b_lo = vec2<u32>(p_lo) / vec2<u32>(4u, 2u);
     let b_hi = vec2<u32>(p_hi) / vec2<u32>(4u, 2u);
-    block_rects[i] = vec2<u32>(b_lo.x | (b_lo.y << 16u), b_hi.x | (b_hi.y << 16u));
+    block_shapes[i] = block_shape(t0, t1, t2, mu2d, r2u, disc,
+                                  vec2<u32>(b_lo.x | (b_lo.y << 16u), b_hi.x | (b_hi.y << 16u)));
     let nc = params.num_channels;
     let last = nc - 1u;
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
@@ -122,6 +123,44 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     tile_counts[i] = extent.x * extent.y;
     depth_keys[i] = depth_key(mu_c.z);
     surfel_ids[i] = i;
+}
+
+// The footprint that the rasterizers' subgroup variant turns into block masks (see BlockShape in
+// common/render_types.wgsl and block_mask in rasterize_core.wgsl): the ellipse u^2 + v^2 <= r2u, its
+// level slightly raised (1.001 r2u + 1e-3) against the rounding of log, exp and the threshold test. It is
+// computed from T's rows shifted to the projected centre (t0 - mu.x t2, t1 - mu.y t2), so that the centred
+// second moments below do not cancel against the square of an absolute position (hundreds of pixels):
+// what is left is rounding relative to the ellipse's own size. Unbounded or degenerate images keep
+// the whole box (an ellipse that covers everything).
+fn block_shape(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, mu: vec2<f32>, r2u: f32, disc: f32,
+               rect: vec2<u32>) -> BlockShape {
+    var b: BlockShape;
+    b.ellipse = vec4<f32>(mu, 0.0, 3e38);
+    b.band = vec4<f32>(0.0, 0.0, 3e38, disc);
+    b.rect = rect;
+    let r2e = 1.001 * r2u + 1e-3;
+    let d = vec3<f32>(r2e, r2e, -1.0);
+    let s0 = t0 - mu.x * t2;
+    let s1 = t1 - mu.y * t2;
+    let dz = dot(d, t2 * t2);
+    if dz < 0.0 {
+        let f = d / dz;
+        let m = vec2<f32>(dot(f, s0 * t2), dot(f, s1 * t2));
+        let sxx = m.x * m.x - dot(f, s0 * s0);
+        let syy = m.y * m.y - dot(f, s1 * s1);
+        let sxy = m.x * m.y - dot(f, s0 * s1);
+        let k = sxy / syy;
+        let c = max(sxx - k * sxy, 0.0);
+        let q = c / syy;
+        let ystar = sxy / sqrt(sxx);
+        let h_y = sqrt(syy);
+        let v = vec4<f32>(m, k, c) + vec4<f32>(q, ystar, h_y, 0.0);   // finite iff all of them are
+        if sxx > 0.0 && syy > 0.0 && all(abs(v) < vec4<f32>(1e30)) {
+            b.ellipse = vec4<f32>(mu + m, k, c);
+            b.band = vec4<f32>(q, ystar, h_y, disc);
+        }
+    }
+    return b;
 }
 
 // The depth sort's key: DEPTH_KEY_BITS (24) bits, so that the sort takes 6 radix passes instead of 8.

@@ -14,7 +14,7 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(14) var<storage, read> block_rects: array<vec2<u32>>;      // [N] see project_fwd.wgsl
+@group(0) @binding(14) var<storage, read> block_shapes: array<BlockShape>;    // [N] see project_fwd.wgsl
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3, zero-padded
 // Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
 var<workgroup> batch_blocks: array<u32, BATCH>;
@@ -123,7 +123,7 @@ fn block_bit(p: vec2<u32>) -> u32 {
 #if USE_SUBGROUPS
 // Blocks of tile `tile` that a surfel's block rectangle `r` (packed, see project_fwd.wgsl) reaches. Loop-free:
 // the column set times a 1 in each covered row's nibble (no carries, as the column set is below 16).
-fn block_mask(r: vec2<u32>, tile: u32) -> u32 {
+fn box_mask(r: vec2<u32>, tile: u32) -> u32 {
     let t = vec2<i32>(i32((tile % params.tile_grid.x) * (TILE_SIZE / 4u)), i32((tile / params.tile_grid.x) * (TILE_SIZE / 2u)));
     let lo = max(vec2<i32>(vec2<u32>(r.x & 0xffffu, r.x >> 16u)) - t, vec2<i32>(0));
     let hi = min(vec2<i32>(vec2<u32>(r.y & 0xffffu, r.y >> 16u)) - t, vec2<i32>(3, 7));
@@ -133,6 +133,51 @@ fn block_mask(r: vec2<u32>, tile: u32) -> u32 {
     let cols = ((2u << u32(hi.x)) - 1u) & ~((1u << u32(lo.x)) - 1u);
     let rows = (0x11111111u >> (4u * u32(7 - hi.y))) & (0xffffffffu << (4u * u32(lo.y)));
     return cols * rows;
+}
+
+// The 4-pixel block columns of the tile (bits 0-3) whose pixel centres in rows y0 .. y0 + 7 (centres,
+// absolute) can reach alpha >= 1/255: the x-range of the ellipse over those rows (widened by `margin`
+// on every side) united with the disc's box. A subgroup covers a 4x8 pixel block, so a mask finer than
+// these 8-row bands would list no fewer hits. The ellipse's right edge, x(Y) = k Y + sqrt(c - q Y^2),
+// is concave, so its maximum over the band clipped to [-h_y, h_y] lies at ystar clamped into it (the
+// left edge likewise at -ystar): two square roots per band.
+fn band_columns(f: BlockShape, mu: vec2<f32>, x0: f32, y0: f32, margin: f32) -> u32 {
+    let k = f.ellipse.z;
+    let c = f.ellipse.w;
+    let q = f.band.x;
+    let lo_y = max(y0 - f.ellipse.y - margin, -f.band.z);
+    let hi_y = min(y0 + 7.0 - f.ellipse.y + margin, f.band.z);
+    let yr = clamp(f.band.y, lo_y, hi_y);
+    let yl = clamp(-f.band.y, lo_y, hi_y);
+    let in_e = lo_y <= hi_y;
+    let in_d = abs(clamp(mu.y, y0, y0 + 7.0) - mu.y) <= f.band.w;
+    let xr = f.ellipse.x + k * yr + sqrt(max(c - q * yr * yr, 0.0));
+    let xl = f.ellipse.x + k * yl - sqrt(max(c - q * yl * yl, 0.0));
+    let hi = max(select(-3e38, xr, in_e), select(-3e38, mu.x + f.band.w, in_d)) + margin;
+    let lo = min(select(3e38, xl, in_e), select(3e38, mu.x - f.band.w, in_d)) - margin;
+    // Pixels (tile-local) whose centres p + 0.5 lie in [lo, hi], clamped to one pixel beyond the tile.
+    let p_lo = i32(clamp(ceil(lo - x0 - 0.5), -1.0, 16.0));
+    let p_hi = i32(clamp(floor(hi - x0 - 0.5), -1.0, 16.0));
+    let b_lo = max(p_lo, 0) >> 2u;
+    let b_hi = min(p_hi, 15) >> 2u;
+    let cols = ((2u << u32(max(b_hi, 0))) - 1u) & ~((1u << u32(min(b_lo, 3))) - 1u);
+    return select(0u, cols, p_lo <= p_hi && p_hi >= 0 && p_lo <= 15);
+}
+
+// Blocks of tile `tile` (see block_bit) where surfel `s` (shape `f`) can reach alpha >= 1/255 at some
+// pixel centre: its box, intersected with the ellipse-and-disc columns of the tile's two 8-row bands.
+// Strictly conservative: the ellipse is the one the box is built from (its level raised against
+// rounding, see project_fwd.wgsl) and every range is widened by the box's margin, so every pixel the
+// box's mask drops from a subgroup has alpha < 1/255 there and is skipped by the blend anyway
+// (images and gradients stay bit-identical).
+fn block_mask(f: BlockShape, s: ProjectedSurfel, tile: u32) -> u32 {
+    let box = box_mask(f.rect, tile);
+    let o = tile_origin(tile);
+    let mu = vec2<f32>(s.t0.w, s.t1.w);
+    let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
+    let top = band_columns(f, mu, o.x, o.y + 0.5, margin);
+    let bottom = band_columns(f, mu, o.x, o.y + 8.5, margin);
+    return box & ((top | (bottom << 16u)) * 0x1111u);
 }
 #endif
 
@@ -148,9 +193,10 @@ fn tile_origin(tile: u32) -> vec2<f32> {
 
 // Copy surfel `sid` into batch slot `slot` (colours padded to vec4 chunks, block mask when needed).
 fn stage_surfel(slot: u32, sid: u32, tile: u32) {
-    batch_surf[slot] = projected[sid];
+    let s = projected[sid];
+    batch_surf[slot] = s;
 #if USE_SUBGROUPS
-    batch_blocks[slot] = block_mask(block_rects[sid], tile);
+    batch_blocks[slot] = block_mask(block_shapes[sid], s, tile);
     batch_color[slot] = colors4[sid];
 #else
     for (var c = 0u; c < CHUNKS; c++) {
