@@ -145,7 +145,7 @@ class SurfelRasterizer:
             params=kept("params", params.nbytes, UNIFORM),
             projected=kept("projected", 64 * n),
             tile_rects=scratch("tile_rects", 16 * n),
-            block_shapes=kept("block_shapes", 48 * n),
+            block_shapes=kept("block_shapes", 32 * n),
             colors4=kept("colors4", 16 * n),
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),

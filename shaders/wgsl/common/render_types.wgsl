@@ -35,12 +35,11 @@ struct ProjectedSurfel {
 
 // What the rasterizers' subgroup variant needs to find the 4x2 pixel blocks of a tile that a surfel can
 // reach with alpha >= 1/255 (written by project_fwd.wgsl, read by block_mask in rasterize_core.wgsl;
-// 48 bytes). The ellipse's points at height Y = y - centre.y span x = centre.x + k Y +- sqrt(c - q Y^2)
+// 32 bytes). The ellipse's points at height Y = y - centre.y span x = centre.x + k Y +- sqrt(c - q Y^2)
 // for |Y| <= h_y; its rightmost point lies at Y = ystar, its leftmost at -ystar.
 struct BlockShape {
     ellipse: vec4<f32>,         // centre x, centre y, k, c
     band: vec4<f32>,            // q, ystar, h_y, radius of the 2D-distance disc around the projected centre
-    rect: vec2<u32>,            // the box in 4x2 pixel blocks, packed: lo.x | lo.y << 16, hi.x | hi.y << 16
 };
 
 // Indirect-dispatch arguments followed by the element count they were derived from (16 bytes).

@@ -15,11 +15,11 @@
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
 // What the rasterizers' subgroup variant stages per intersection, precomputed here once per surfel (see
-// stage_surfel in rasterize_core.wgsl): the pixel rectangle in 4x2 pixel blocks, packed (lo.x | lo.y << 16,
-// hi.x | hi.y << 16; images are at most 65535 pixels a side), and the first four colour channels as one
-// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the float bounds with a row
-// loop and the colours as scalars, four same-run comparisons: forward rasterize -3 to -4.5 %, backward -1
-// to -4 % in three and +7 % in one (noise under load), projection +0.4 to +0.7 ms, about +16 %.)
+// stage_surfel in rasterize_core.wgsl): the footprint ellipse and disc that block_mask turns into the
+// tile's 4x2 pixel blocks (see block_shape below), and the first four colour channels as one
+// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
+// the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
+// -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
 @group(0) @binding(10) var<storage, read_write> block_shapes: array<BlockShape>;   // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
@@ -111,10 +111,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
     tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
-    let b_lo = vec2<u32>(p_lo) / vec2<u32>(4u, 2u);
-    let b_hi = vec2<u32>(p_hi) / vec2<u32>(4u, 2u);
-    block_shapes[i] = block_shape(t0, t1, t2, mu2d, r2u, disc,
-                                  vec2<u32>(b_lo.x | (b_lo.y << 16u), b_hi.x | (b_hi.y << 16u)));
+    block_shapes[i] = block_shape(t0, t1, t2, mu2d, r2u, disc);
     let nc = params.num_channels;
     let last = nc - 1u;
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
@@ -132,12 +129,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 // second moments below do not cancel against the square of an absolute position (hundreds of pixels):
 // what is left is rounding relative to the ellipse's own size. Unbounded or degenerate images keep
 // the whole box (an ellipse that covers everything).
-fn block_shape(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, mu: vec2<f32>, r2u: f32, disc: f32,
-               rect: vec2<u32>) -> BlockShape {
+fn block_shape(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, mu: vec2<f32>, r2u: f32, disc: f32) -> BlockShape {
     var b: BlockShape;
     b.ellipse = vec4<f32>(mu, 0.0, 3e38);
     b.band = vec4<f32>(0.0, 0.0, 3e38, disc);
-    b.rect = rect;
     let r2e = 1.001 * r2u + 1e-3;
     let d = vec3<f32>(r2e, r2e, -1.0);
     let s0 = t0 - mu.x * t2;
