@@ -16,7 +16,7 @@
 #if USE_SUBGROUPS
 @group(0) @binding(14) var<storage, read> block_shapes: array<BlockShape>;    // [N] see project_fwd.wgsl
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3, zero-padded
-// Per staged surfel: which 4x2 pixel blocks of the tile its screen bounds touch (bit by*4 + bx).
+// Per staged surfel: which 4x2 pixel blocks of the tile its footprint can reach (bit by*4 + bx, see block_mask).
 var<workgroup> batch_blocks: array<u32, BATCH>;
 // Per subgroup (row sg_id * (BATCH + SG)): the batch slots whose block mask meets the subgroup's blocks,
 // then up to SG - 1 entries of scratch (see list_hits).
@@ -253,7 +253,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // Each thread composites four pixels of one column, ROW_STEP apart, so that a subgroup of 8 covers a
 // 4x8 block (see tile_pixel_quad) and every surfel passed around serves four times as many pixels
 // (standard scene, 100k surfels, this pass on lavapipe: 133 ms with one pixel per thread, 102 with two,
-// 96 with four). A surfel whose screen bounds miss the subgroup's block is skipped by the whole subgroup at once: the
+// 96 with four). A surfel whose footprint (block_mask) misses the subgroup's block is skipped by the whole subgroup at once: the
 // staged surfels that can touch it first go, in order, into its row of hit_slots, and only then is
 // surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
 // least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
