@@ -33,14 +33,12 @@ struct ProjectedSurfel {
     normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth
 };
 
-// What the rasterizers' subgroup variant needs to find the 4x2 pixel blocks of a tile that a surfel can
-// reach with alpha >= 1/255 (written by project_fwd.wgsl, read by block_mask in rasterize_core.wgsl;
-// 32 bytes). The ellipse's points at height Y = y - centre.y span x = centre.x + k Y +- sqrt(c - q Y^2)
-// for |Y| <= h_y; its rightmost point lies at Y = ystar, its leftmost at -ystar.
-struct BlockShape {
-    ellipse: vec4<f32>,         // centre x, centre y, k, c
-    band: vec4<f32>,            // q, ystar, h_y, radius of the 2D-distance disc around the projected centre
-};
+// Words per surfel of the block bands that projection writes for the rasterizers' subgroup variant
+// (see write_bands in project_fwd.wgsl), and the band count that marks a surfel as using its box.
+// Four words: surfels up to three bands tall (24 pixels) get the tighter mask; see block_mask in
+// rasterize_core.wgsl for why not more.
+const BAND_WORDS: u32 = 4u;
+const BIG_BANDS: u32 = 0xffffu;
 
 // Indirect-dispatch arguments followed by the element count they were derived from (16 bytes).
 struct DispatchInfo {

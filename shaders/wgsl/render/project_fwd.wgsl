@@ -15,14 +15,22 @@
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
 // What the rasterizers' subgroup variant stages per intersection, precomputed here once per surfel (see
-// stage_surfel in rasterize_core.wgsl): the footprint ellipse and disc that block_mask turns into the
-// tile's 4x2 pixel blocks (see block_shape below), and the first four colour channels as one
+// stage_surfel in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
+// (see write_bands below; block_mask turns them into the tile's blocks), and the first four colour channels as one
 // zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
 // the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
 // -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
-@group(0) @binding(10) var<storage, read_write> block_shapes: array<BlockShape>;   // [N]
+@group(0) @binding(10) var<storage, read_write> block_bands: array<u32>;          // [N * BAND_WORDS]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
+
+// What the rasterizers' subgroup variant needs to find the 4x2 pixel blocks of a tile that a surfel can
+// reach with alpha >= 1/255 (see write_bands). The ellipse's points at height Y = y - centre.y span x = centre.x + k Y +- sqrt(c - q Y^2)
+// for |Y| <= h_y; its rightmost point lies at Y = ystar, its leftmost at -ystar.
+struct BlockShape {
+    ellipse: vec4<f32>,         // centre x, centre y, k, c
+    band: vec4<f32>,            // q, ystar, h_y, radius of the 2D-distance disc around the projected centre
+};
 
 fn cull(i: u32) {
     tile_counts[i] = 0u;
@@ -111,7 +119,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
     tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
-    block_shapes[i] = block_shape(t0, t1, t2, mu2d, r2u, disc);
+    write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi);
     let nc = params.num_channels;
     let last = nc - 1u;
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
@@ -122,8 +130,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     surfel_ids[i] = i;
 }
 
-// The footprint that the rasterizers' subgroup variant turns into block masks (see BlockShape in
-// common/render_types.wgsl and block_mask in rasterize_core.wgsl): the ellipse u^2 + v^2 <= r2u, its
+// The footprint from which write_bands computes the rasterizers' block bands (see BlockShape above and
+// block_mask in rasterize_core.wgsl): the ellipse u^2 + v^2 <= r2u, its
 // level slightly raised (1.001 r2u + 1e-3) against the rounding of log, exp and the threshold test. It is
 // computed from T's rows shifted to the projected centre (t0 - mu.x t2, t1 - mu.y t2), so that the centred
 // second moments below do not cancel against the square of an absolute position (hundreds of pixels):
@@ -156,6 +164,54 @@ fn block_shape(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, mu: vec2<f32>, r2u: 
         }
     }
     return b;
+}
+
+// The x-range (absolute, widened by `margin`) of the pixel centres in rows y0 .. y0 + 7 (centres) where
+// the surfel can reach alpha >= 1/255: the ellipse's x-range over those rows united with the disc's box;
+// lo > hi when empty. The ellipse's right edge, x(Y) = k Y + sqrt(c - q Y^2), is concave, so its
+// maximum over the band clipped to [-h_y, h_y] lies at ystar clamped into it (the left edge likewise at
+// -ystar): two square roots per band.
+fn band_range(f: BlockShape, mu: vec2<f32>, y0: f32, margin: f32) -> vec2<f32> {
+    let k = f.ellipse.z;
+    let c = f.ellipse.w;
+    let q = f.band.x;
+    let lo_y = max(y0 - f.ellipse.y - margin, -f.band.z);
+    let hi_y = min(y0 + 7.0 - f.ellipse.y + margin, f.band.z);
+    let yr = clamp(f.band.y, lo_y, hi_y);
+    let yl = clamp(-f.band.y, lo_y, hi_y);
+    let in_e = lo_y <= hi_y;
+    let in_d = abs(clamp(mu.y, y0, y0 + 7.0) - mu.y) <= f.band.w;
+    let xr = f.ellipse.x + k * yr + sqrt(max(c - q * yr * yr, 0.0));
+    let xl = f.ellipse.x + k * yl - sqrt(max(c - q * yl * yl, 0.0));
+    let hi = max(select(-3e38, xr, in_e), select(-3e38, mu.x + f.band.w, in_d)) + margin;
+    let lo = min(select(3e38, xl, in_e), select(3e38, mu.x - f.band.w, in_d)) - margin;
+    return vec2<f32>(lo, hi);
+}
+
+// block_bands[i * BAND_WORDS ..]: word 0 the surfel's first 8-row band (y / 8 of its box's top pixel)
+// | the number of bands << 16 (BIG_BANDS when there are more than BAND_WORDS - 1; then word 1 holds
+// the box's columns for every band); then per band the 4-pixel columns (x / 4, absolute) of the pixels
+// whose centres band_range covers, clamped to the box: lo | hi << 16, lo > hi when empty.
+fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) {
+    let first = u32(p_lo.y) / 8u;
+    let nb = u32(p_hi.y) / 8u - first + 1u;
+    let base = i * BAND_WORDS;
+    let box_cols = vec2<u32>(u32(p_lo.x) / 4u, u32(p_hi.x) / 4u);
+    if nb >= BAND_WORDS {
+        block_bands[base] = first | (BIG_BANDS << 16u);
+        block_bands[base + 1u] = box_cols.x | (box_cols.y << 16u);
+        return;
+    }
+    block_bands[base] = first | (nb << 16u);
+    let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
+    for (var j = 0u; j < nb; j++) {
+        let r = band_range(f, mu, f32(8u * (first + j)) + 0.5, margin);
+        // Pixels whose centres p + 0.5 lie in [lo, hi], within the box.
+        let px_lo = max(ceil(r.x - 0.5), p_lo.x);
+        let px_hi = min(floor(r.y - 0.5), p_hi.x);
+        let cols = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u);
+        block_bands[base + 1u + j] = select(0xffffu, cols.x | (cols.y << 16u), px_lo <= px_hi);
+    }
 }
 
 // The depth sort's key: DEPTH_KEY_BITS (24) bits, so that the sort takes 6 radix passes instead of 8.

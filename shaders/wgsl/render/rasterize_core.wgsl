@@ -14,7 +14,7 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(14) var<storage, read> block_shapes: array<BlockShape>;    // [N] see project_fwd.wgsl
+@group(0) @binding(14) var<storage, read> block_bands: array<u32>;           // [N * BAND_WORDS] see project_fwd.wgsl
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3, zero-padded
 // Per staged surfel: which 4x2 pixel blocks of the tile its footprint can reach (bit by*4 + bx, see block_mask).
 var<workgroup> batch_blocks: array<u32, BATCH>;
@@ -121,51 +121,38 @@ fn block_bit(p: vec2<u32>) -> u32 {
 }
 
 #if USE_SUBGROUPS
-// The 4-pixel block columns of the tile (bits 0-3) whose pixel centres in rows y0 .. y0 + 7 (centres,
-// absolute) can reach alpha >= 1/255: the x-range of the ellipse over those rows (widened by `margin`
-// on every side) united with the disc's box. A subgroup covers a 4x8 pixel block, so a mask finer than
-// these 8-row bands would list no fewer hits. The ellipse's right edge, x(Y) = k Y + sqrt(c - q Y^2),
-// is concave, so its maximum over the band clipped to [-h_y, h_y] lies at ystar clamped into it (the
-// left edge likewise at -ystar): two square roots per band.
-fn band_columns(f: BlockShape, mu: vec2<f32>, x0: f32, y0: f32, margin: f32) -> u32 {
-    let k = f.ellipse.z;
-    let c = f.ellipse.w;
-    let q = f.band.x;
-    let lo_y = max(y0 - f.ellipse.y - margin, -f.band.z);
-    let hi_y = min(y0 + 7.0 - f.ellipse.y + margin, f.band.z);
-    let yr = clamp(f.band.y, lo_y, hi_y);
-    let yl = clamp(-f.band.y, lo_y, hi_y);
-    let in_e = lo_y <= hi_y;
-    let in_d = abs(clamp(mu.y, y0, y0 + 7.0) - mu.y) <= f.band.w;
-    let xr = f.ellipse.x + k * yr + sqrt(max(c - q * yr * yr, 0.0));
-    let xl = f.ellipse.x + k * yl - sqrt(max(c - q * yl * yl, 0.0));
-    let hi = max(select(-3e38, xr, in_e), select(-3e38, mu.x + f.band.w, in_d)) + margin;
-    let lo = min(select(3e38, xl, in_e), select(3e38, mu.x - f.band.w, in_d)) - margin;
-    // Pixels (tile-local) whose centres p + 0.5 lie in [lo, hi], clamped to one pixel beyond the tile.
-    let p_lo = i32(clamp(ceil(lo - x0 - 0.5), -1.0, 16.0));
-    let p_hi = i32(clamp(floor(hi - x0 - 0.5), -1.0, 16.0));
-    let b_lo = max(p_lo, 0) >> 2u;
-    let b_hi = min(p_hi, 15) >> 2u;
-    let cols = ((2u << u32(max(b_hi, 0))) - 1u) & ~((1u << u32(min(b_lo, 3))) - 1u);
-    return select(0u, cols, p_lo <= p_hi && p_hi >= 0 && p_lo <= 15);
+// The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
+// (absolute 8-row band) of the surfel whose block bands start at word `base` (see write_bands).
+fn band_columns(base: u32, head: u32, band: u32, tcol: u32) -> u32 {
+    let j = band - (head & 0xffffu);   // wraps above the first band
+    let nb = head >> 16u;
+    let inside = nb == BIG_BANDS || j < nb;
+    let w = block_bands[base + 1u + select(min(j, BAND_WORDS - 2u), 0u, nb == BIG_BANDS)];
+    let lo = max(i32(w & 0xffffu) - i32(tcol), 0);
+    let hi = min(i32(w >> 16u) - i32(tcol), 3);
+    let cols = ((2u << u32(max(hi, 0))) - 1u) & ~((1u << u32(min(lo, 3))) - 1u);
+    return select(0u, cols, inside && lo <= hi);
 }
 
-// Blocks of tile `tile` (see block_bit) where surfel `s` (shape `f`) can reach alpha >= 1/255 at some
-// pixel centre: the ellipse-and-disc columns of the tile's two 8-row bands, each repeated over the
-// band's four block rows. Strictly conservative: the ellipse is the box's (its level raised against
-// rounding, see project_fwd.wgsl), and the rows and columns are widened by the box's margin, so a
-// subgroup that a surfel's box reaches but this mask does not sees only alpha < 1/255 from it, which the
-// blend skips anyway (images and gradients bit-identical to the box's). Standard scene, 100k surfels:
-// subgroup hit candidates 674k with the box, 553k with these bands (543k with the exact ranges of the 8
-// rows, four square roots more per band); lavapipe, same runs against the box: forward rasterize -3 %,
-// backward -4.5 %, projection +0.5 ms. Intersecting with the box as well (48-byte shapes, the packed
-// block rectangle read too) was 1.5-3 % slower in both passes in three of four same-run comparisons.
-fn block_mask(f: BlockShape, s: ProjectedSurfel, tile: u32) -> u32 {
-    let o = tile_origin(tile);
-    let mu = vec2<f32>(s.t0.w, s.t1.w);
-    let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
-    let top = band_columns(f, mu, o.x, o.y + 0.5, margin);
-    let bottom = band_columns(f, mu, o.x, o.y + 8.5, margin);
+// Blocks of tile `tile` (see block_bit) where surfel `sid` can reach alpha >= 1/255 at some pixel centre:
+// the columns of the tile's two 8-row bands (a subgroup's height, so a finer mask would list no fewer
+// hits) that projection computed, each repeated over the band's four block rows. Strictly
+// conservative (see block_shape in project_fwd.wgsl), so a subgroup that the surfel's box reaches but
+// this mask does not sees only alpha < 1/255 from it, which the blend skips anyway: images and
+// gradients are bit-identical to the box's. Standard scene (100k surfels, random orientations):
+// subgroup hit candidates 669k with the box, 551k with the bands of every surfel; lavapipe, same runs
+// against the box: forward and backward rasterize -5 to -6 %, projection +0.7 ms. Avatar-like scene
+// (small surfels, no fewer hits): both passes +2 to +4 %. Computing the ellipse's columns while staging
+// (32 bytes per surfel read) gained the same on the standard scene and cost +5 to +8 % on the avatar;
+// 16 band words per surfel (bands up to 120 pixels tall, 64 bytes) +4 to +6 % on the avatar: the
+// staging reads miss the cache more (the box was 8 bytes).
+fn block_mask(sid: u32, tile: u32) -> u32 {
+    let base = sid * BAND_WORDS;
+    let head = block_bands[base];
+    let band = (tile / params.tile_grid.x) * (TILE_SIZE / 8u);
+    let tcol = (tile % params.tile_grid.x) * (TILE_SIZE / 4u);
+    let top = band_columns(base, head, band, tcol);
+    let bottom = band_columns(base, head, band + 1u, tcol);
     return (top | (bottom << 16u)) * 0x1111u;
 }
 #endif
@@ -182,10 +169,9 @@ fn tile_origin(tile: u32) -> vec2<f32> {
 
 // Copy surfel `sid` into batch slot `slot` (colours padded to vec4 chunks, block mask when needed).
 fn stage_surfel(slot: u32, sid: u32, tile: u32) {
-    let s = projected[sid];
-    batch_surf[slot] = s;
+    batch_surf[slot] = projected[sid];
 #if USE_SUBGROUPS
-    batch_blocks[slot] = block_mask(block_shapes[sid], s, tile);
+    batch_blocks[slot] = block_mask(sid, tile);
     batch_color[slot] = colors4[sid];
 #else
     for (var c = 0u; c < CHUNKS; c++) {
