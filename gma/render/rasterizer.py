@@ -38,7 +38,7 @@ class ProjectionState:
     params: wgpu.GPUBuffer        # RenderParams uniform
     projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
-    block_bands: wgpu.GPUBuffer   # [N * 16] u32: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
+    block_bands: wgpu.GPUBuffer   # [N] vec2<u32>: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
     colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
@@ -145,7 +145,7 @@ class SurfelRasterizer:
             params=kept("params", params.nbytes, UNIFORM),
             projected=kept("projected", 64 * n),
             tile_rects=scratch("tile_rects", 16 * n),
-            block_bands=kept("block_bands", 16 * n),
+            block_bands=kept("block_bands", 8 * n),
             colors4=kept("colors4", 16 * n),
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),

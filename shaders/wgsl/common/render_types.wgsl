@@ -33,13 +33,6 @@ struct ProjectedSurfel {
     normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth
 };
 
-// Words per surfel of the block bands that projection writes for the rasterizers' subgroup variant
-// (see write_bands in project_fwd.wgsl), and the band count that marks a surfel as using its box.
-// Four words: surfels up to three bands tall (24 pixels) get the tighter mask; see block_mask in
-// rasterize_core.wgsl for why not more.
-const BAND_WORDS: u32 = 4u;
-const BIG_BANDS: u32 = 0xffffu;
-
 // Indirect-dispatch arguments followed by the element count they were derived from (16 bytes).
 struct DispatchInfo {
     groups_x: u32,

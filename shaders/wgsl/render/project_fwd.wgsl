@@ -20,7 +20,7 @@
 // zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
 // the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
 // -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
-@group(0) @binding(10) var<storage, read_write> block_bands: array<u32>;          // [N * BAND_WORDS]
+@group(0) @binding(10) var<storage, read_write> block_bands: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
 
@@ -188,30 +188,31 @@ fn band_range(f: BlockShape, mu: vec2<f32>, y0: f32, margin: f32) -> vec2<f32> {
     return vec2<f32>(lo, hi);
 }
 
-// block_bands[i * BAND_WORDS ..]: word 0 the surfel's first 8-row band (y / 8 of its box's top pixel)
-// | the number of bands << 16 (BIG_BANDS when there are more than BAND_WORDS - 1; then word 1 holds
-// the box's columns for every band); then per band the 4-pixel columns (x / 4, absolute) of the pixels
-// whose centres band_range covers, clamped to the box: lo | hi << 16, lo > hi when empty.
+// block_bands[i] (8 bytes, as many as the box they replace): x = the surfel's first 8-row band (y / 8
+// of its box's top pixel, 13 bits) | the number of bands << 13 (1-3; 0 for BIG: taller, or wider than
+// 32 columns) | the box's first 4-pixel column (x / 4) << 15. y = per band j (5 bits each, from bit
+// 10 j) the first and last column, relative to the box's first, of the pixels whose centres band_range
+// covers within the box (first 31, last 0 when empty); for BIG, the box's last column, for every band.
 fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) {
     let first = u32(p_lo.y) / 8u;
     let nb = u32(p_hi.y) / 8u - first + 1u;
-    let base = i * BAND_WORDS;
-    let box_cols = vec2<u32>(u32(p_lo.x) / 4u, u32(p_hi.x) / 4u);
-    if nb >= BAND_WORDS {
-        block_bands[base] = first | (BIG_BANDS << 16u);
-        block_bands[base + 1u] = box_cols.x | (box_cols.y << 16u);
+    let col0 = u32(p_lo.x) / 4u;
+    let col1 = u32(p_hi.x) / 4u;
+    if nb > 3u || col1 - col0 > 31u {
+        block_bands[i] = vec2<u32>(first | (col0 << 15u), col1);
         return;
     }
-    block_bands[base] = first | (nb << 16u);
     let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
+    var cols = 0u;
     for (var j = 0u; j < nb; j++) {
         let r = band_range(f, mu, f32(8u * (first + j)) + 0.5, margin);
         // Pixels whose centres p + 0.5 lie in [lo, hi], within the box.
         let px_lo = max(ceil(r.x - 0.5), p_lo.x);
         let px_hi = min(floor(r.y - 0.5), p_hi.x);
-        let cols = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u);
-        block_bands[base + 1u + j] = select(0xffffu, cols.x | (cols.y << 16u), px_lo <= px_hi);
+        let c = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u) - col0;
+        cols |= select(31u, c.x | (c.y << 5u), px_lo <= px_hi) << (10u * j);
     }
+    block_bands[i] = vec2<u32>(first | (nb << 13u) | (col0 << 15u), cols);
 }
 
 // The depth sort's key: DEPTH_KEY_BITS (24) bits, so that the sort takes 6 radix passes instead of 8.

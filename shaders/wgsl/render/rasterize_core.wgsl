@@ -14,7 +14,7 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(14) var<storage, read> block_bands: array<u32>;           // [N * BAND_WORDS] see project_fwd.wgsl
+@group(0) @binding(14) var<storage, read> block_bands: array<vec2<u32>>;     // [N] see write_bands in project_fwd.wgsl
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3, zero-padded
 // Per staged surfel: which 4x2 pixel blocks of the tile its footprint can reach (bit by*4 + bx, see block_mask).
 var<workgroup> batch_blocks: array<u32, BATCH>;
@@ -122,16 +122,16 @@ fn block_bit(p: vec2<u32>) -> u32 {
 
 #if USE_SUBGROUPS
 // The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
-// (absolute 8-row band) of the surfel whose block bands start at word `base` (see write_bands).
-fn band_columns(base: u32, head: u32, band: u32, tcol: u32) -> u32 {
-    let j = band - (head & 0xffffu);   // wraps above the first band
-    let nb = head >> 16u;
-    let inside = nb == BIG_BANDS || j < nb;
-    let w = block_bands[base + 1u + select(min(j, BAND_WORDS - 2u), 0u, nb == BIG_BANDS)];
-    let lo = max(i32(w & 0xffffu) - i32(tcol), 0);
-    let hi = min(i32(w >> 16u) - i32(tcol), 3);
+// (absolute 8-row band) of a surfel with block bands `w` (see write_bands in project_fwd.wgsl).
+fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {
+    let j = band - (w.x & 0x1fffu);   // wraps above the first band
+    let nb = (w.x >> 13u) & 3u;
+    let col0 = i32(w.x >> 15u) - i32(tcol);
+    let bits = w.y >> (10u * min(j, 2u));
+    let lo = max(col0 + select(i32(bits & 31u), 0, nb == 0u), 0);
+    let hi = min(select(col0 + i32((bits >> 5u) & 31u), i32(w.y) - i32(tcol), nb == 0u), 3);
     let cols = ((2u << u32(max(hi, 0))) - 1u) & ~((1u << u32(min(lo, 3))) - 1u);
-    return select(0u, cols, inside && lo <= hi);
+    return select(0u, cols, (nb == 0u || j < nb) && lo <= hi);
 }
 
 // Blocks of tile `tile` (see block_bit) where surfel `sid` can reach alpha >= 1/255 at some pixel centre:
@@ -140,20 +140,17 @@ fn band_columns(base: u32, head: u32, band: u32, tcol: u32) -> u32 {
 // conservative (see block_shape in project_fwd.wgsl), so a subgroup that the surfel's box reaches but
 // this mask does not sees only alpha < 1/255 from it, which the blend skips anyway: images and
 // gradients are bit-identical to the box's. Standard scene (100k surfels, random orientations):
-// subgroup hit candidates 669k with the box, 551k with the bands of every surfel; lavapipe, same runs
-// against the box: forward and backward rasterize -5 to -6 %, projection +0.7 ms. Avatar-like scene
-// (small surfels, no fewer hits): both passes +2 to +4 %. Computing the ellipse's columns while staging
-// (32 bytes per surfel read) gained the same on the standard scene and cost +5 to +8 % on the avatar;
-// 16 band words per surfel (bands up to 120 pixels tall, 64 bytes) +4 to +6 % on the avatar: the
-// staging reads miss the cache more (the box was 8 bytes).
+// subgroup hit candidates 669k with the box, 551k with bands for every surfel; lavapipe, same runs
+// against the box, two each: forward rasterize -8 to -9 %, backward -6 to -7.5 %, projection +0.3 to
+// +0.5 ms; avatar-like scene (small surfels, no fewer hits): forward -0.5 / +0.8 %, backward -2 / +3 %
+// (noise). Tried: computing the ellipse's columns while staging (32 bytes per surfel read; standard
+// -3 to -5 %, avatar +5 to +8 %); per-band words read from 64 or 16 bytes per surfel (standard -5 to
+// -6 %, avatar +4 to +6 % and +2 to +4 %): the extra bytes per staged surfel miss the cache.
 fn block_mask(sid: u32, tile: u32) -> u32 {
-    let base = sid * BAND_WORDS;
-    let head = block_bands[base];
+    let w = block_bands[sid];
     let band = (tile / params.tile_grid.x) * (TILE_SIZE / 8u);
     let tcol = (tile % params.tile_grid.x) * (TILE_SIZE / 4u);
-    let top = band_columns(base, head, band, tcol);
-    let bottom = band_columns(base, head, band + 1u, tcol);
-    return (top | (bottom << 16u)) * 0x1111u;
+    return (band_columns(w, band, tcol) | (band_columns(w, band + 1u, tcol) << 16u)) * 0x1111u;
 }
 #endif
 
