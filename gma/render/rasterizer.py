@@ -38,7 +38,7 @@ class ProjectionState:
     params: wgpu.GPUBuffer        # RenderParams uniform
     projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
-    block_rects: wgpu.GPUBuffer   # [N] vec2<u32> screen bounds of alpha >= 1/255 in 4x2 pixel blocks
+    block_bands: wgpu.GPUBuffer   # [N] vec2<u32>: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
     colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
@@ -145,7 +145,7 @@ class SurfelRasterizer:
             params=kept("params", params.nbytes, UNIFORM),
             projected=kept("projected", 64 * n),
             tile_rects=scratch("tile_rects", 16 * n),
-            block_rects=kept("block_rects", 8 * n),
+            block_bands=kept("block_bands", 8 * n),
             colors4=kept("colors4", 16 * n),
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),
@@ -161,7 +161,7 @@ class SurfelRasterizer:
         p = ctx.compute_pipeline("render/project_fwd.wgsl")
         self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
-                                    st.depth_order, st.block_rects, surfels.colors, st.colors4],
+                                    st.depth_order, st.block_bands, surfels.colors, st.colors4],
                        ((n + 255) // 256, 1, 1), "project", timer)
         depth_info = scratch("depth_sort.info", 16, INDIRECT)
         ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
@@ -210,7 +210,7 @@ class SurfelRasterizer:
             resources = dict(enumerate(inputs + list(target)))
         if defines["USE_SUBGROUPS"]:  # stages the colours that projection padded (see rasterize_core.wgsl)
             del resources[2]
-            resources[14] = st.block_rects if n else empty
+            resources[14] = st.block_bands if n else empty
             resources[15] = st.colors4 if n else empty
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges
@@ -282,7 +282,7 @@ class SurfelRasterizer:
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         if defines["USE_SUBGROUPS"]:
             del resources[2]
-            resources[14] = state.proj.block_rects
+            resources[14] = state.proj.block_bands
             resources[15] = state.proj.colors4
         if color_in_proj:
             del resources[13]

@@ -15,14 +15,22 @@
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
 // What the rasterizers' subgroup variant stages per intersection, precomputed here once per surfel (see
-// stage_surfel in rasterize_core.wgsl): the pixel rectangle in 4x2 pixel blocks, packed (lo.x | lo.y << 16,
-// hi.x | hi.y << 16; images are at most 65535 pixels a side), and the first four colour channels as one
-// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the float bounds with a row
-// loop and the colours as scalars, four same-run comparisons: forward rasterize -3 to -4.5 %, backward -1
-// to -4 % in three and +7 % in one (noise under load), projection +0.4 to +0.7 ms, about +16 %.)
-@group(0) @binding(10) var<storage, read_write> block_rects: array<vec2<u32>>;    // [N]
+// stage_surfel in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
+// (see write_bands below; block_mask turns them into the tile's blocks), and the first four colour channels as one
+// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
+// the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
+// -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
+@group(0) @binding(10) var<storage, read_write> block_bands: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
+
+// What the rasterizers' subgroup variant needs to find the 4x2 pixel blocks of a tile that a surfel can
+// reach with alpha >= 1/255 (see write_bands). The ellipse's points at height Y = y - centre.y span x = centre.x + k Y +- sqrt(c - q Y^2)
+// for |Y| <= h_y; its rightmost point lies at Y = ystar, its leftmost at -ystar.
+struct BlockShape {
+    ellipse: vec4<f32>,         // centre x, centre y, k, c
+    band: vec4<f32>,            // q, ystar, h_y, radius of the 2D-distance disc around the projected centre
+};
 
 fn cull(i: u32) {
     tile_counts[i] = 0u;
@@ -111,9 +119,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
     tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
-    let b_lo = vec2<u32>(p_lo) / vec2<u32>(4u, 2u);
-    let b_hi = vec2<u32>(p_hi) / vec2<u32>(4u, 2u);
-    block_rects[i] = vec2<u32>(b_lo.x | (b_lo.y << 16u), b_hi.x | (b_hi.y << 16u));
+    write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi);
     let nc = params.num_channels;
     let last = nc - 1u;
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
@@ -122,6 +128,91 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     tile_counts[i] = extent.x * extent.y;
     depth_keys[i] = depth_key(mu_c.z);
     surfel_ids[i] = i;
+}
+
+// The footprint from which write_bands computes the rasterizers' block bands (see BlockShape above and
+// block_mask in rasterize_core.wgsl): the ellipse u^2 + v^2 <= r2u, its
+// level slightly raised (1.001 r2u + 1e-3) against the rounding of log, exp and the threshold test. It is
+// computed from T's rows shifted to the projected centre (t0 - mu.x t2, t1 - mu.y t2), so that the centred
+// second moments below do not cancel against the square of an absolute position (hundreds of pixels):
+// what is left is rounding relative to the ellipse's own size. Unbounded or degenerate images keep
+// the whole box (an ellipse that covers everything).
+fn block_shape(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, mu: vec2<f32>, r2u: f32, disc: f32) -> BlockShape {
+    var b: BlockShape;
+    b.ellipse = vec4<f32>(mu, 0.0, 3e38);
+    b.band = vec4<f32>(0.0, 0.0, 3e38, disc);
+    let r2e = 1.001 * r2u + 1e-3;
+    let d = vec3<f32>(r2e, r2e, -1.0);
+    let s0 = t0 - mu.x * t2;
+    let s1 = t1 - mu.y * t2;
+    let dz = dot(d, t2 * t2);
+    if dz < 0.0 {
+        let f = d / dz;
+        let m = vec2<f32>(dot(f, s0 * t2), dot(f, s1 * t2));
+        let sxx = m.x * m.x - dot(f, s0 * s0);
+        let syy = m.y * m.y - dot(f, s1 * s1);
+        let sxy = m.x * m.y - dot(f, s0 * s1);
+        let k = sxy / syy;
+        let c = max(sxx - k * sxy, 0.0);
+        let q = c / syy;
+        let ystar = sxy / sqrt(sxx);
+        let h_y = sqrt(syy);
+        let v = vec4<f32>(m, k, c) + vec4<f32>(q, ystar, h_y, 0.0);   // finite iff all of them are
+        if sxx > 0.0 && syy > 0.0 && all(abs(v) < vec4<f32>(1e30)) {
+            b.ellipse = vec4<f32>(mu + m, k, c);
+            b.band = vec4<f32>(q, ystar, h_y, disc);
+        }
+    }
+    return b;
+}
+
+// The x-range (absolute, widened by `margin`) of the pixel centres in rows y0 .. y0 + 7 (centres) where
+// the surfel can reach alpha >= 1/255: the ellipse's x-range over those rows united with the disc's box;
+// lo > hi when empty. The ellipse's right edge, x(Y) = k Y + sqrt(c - q Y^2), is concave, so its
+// maximum over the band clipped to [-h_y, h_y] lies at ystar clamped into it (the left edge likewise at
+// -ystar): two square roots per band.
+fn band_range(f: BlockShape, mu: vec2<f32>, y0: f32, margin: f32) -> vec2<f32> {
+    let k = f.ellipse.z;
+    let c = f.ellipse.w;
+    let q = f.band.x;
+    let lo_y = max(y0 - f.ellipse.y - margin, -f.band.z);
+    let hi_y = min(y0 + 7.0 - f.ellipse.y + margin, f.band.z);
+    let yr = clamp(f.band.y, lo_y, hi_y);
+    let yl = clamp(-f.band.y, lo_y, hi_y);
+    let in_e = lo_y <= hi_y;
+    let in_d = abs(clamp(mu.y, y0, y0 + 7.0) - mu.y) <= f.band.w;
+    let xr = f.ellipse.x + k * yr + sqrt(max(c - q * yr * yr, 0.0));
+    let xl = f.ellipse.x + k * yl - sqrt(max(c - q * yl * yl, 0.0));
+    let hi = max(select(-3e38, xr, in_e), select(-3e38, mu.x + f.band.w, in_d)) + margin;
+    let lo = min(select(3e38, xl, in_e), select(3e38, mu.x - f.band.w, in_d)) - margin;
+    return vec2<f32>(lo, hi);
+}
+
+// block_bands[i] (8 bytes, as many as the box they replace): x = the surfel's first 8-row band (y / 8
+// of its box's top pixel, 13 bits) | the number of bands << 13 (1-3; 0 for BIG: taller, or wider than
+// 32 columns) | the box's first 4-pixel column (x / 4) << 15. y = per band j (5 bits each, from bit
+// 10 j) the first and last column, relative to the box's first, of the pixels whose centres band_range
+// covers within the box (first 31, last 0 when empty); for BIG, the box's last column, for every band.
+fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) {
+    let first = u32(p_lo.y) / 8u;
+    let nb = u32(p_hi.y) / 8u - first + 1u;
+    let col0 = u32(p_lo.x) / 4u;
+    let col1 = u32(p_hi.x) / 4u;
+    if nb > 3u || col1 - col0 > 31u {
+        block_bands[i] = vec2<u32>(first | (col0 << 15u), col1);
+        return;
+    }
+    let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
+    var cols = 0u;
+    for (var j = 0u; j < nb; j++) {
+        let r = band_range(f, mu, f32(8u * (first + j)) + 0.5, margin);
+        // Pixels whose centres p + 0.5 lie in [lo, hi], within the box.
+        let px_lo = max(ceil(r.x - 0.5), p_lo.x);
+        let px_hi = min(floor(r.y - 0.5), p_hi.x);
+        let c = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u) - col0;
+        cols |= select(31u, c.x | (c.y << 5u), px_lo <= px_hi) << (10u * j);
+    }
+    block_bands[i] = vec2<u32>(first | (nb << 13u) | (col0 << 15u), cols);
 }
 
 // The depth sort's key: DEPTH_KEY_BITS (24) bits, so that the sort takes 6 radix passes instead of 8.
