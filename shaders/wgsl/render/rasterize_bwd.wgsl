@@ -281,13 +281,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     // Without normal and depth gradients their slots (12-15) carry the colour gradients
                     // (copied out by project_bwd): 15 values in two rounds of adds instead of three
                     // (this pass -4 to -8 %, standard scene, 100k surfels, same runs, load 0.9-1.4).
+#if NORMAL_DEPTH_GRADS
+                    let tail = d;
+#else
+                    let tail = e;   // the colour gradients, in the normal and depth slots
+#endif
                     for (var i0 = 0u; i0 < PROJ_VALUES; i0 += SG) {
                         let i = i0 + sg_lane;
-                        var v = proj_component(i, a, b, c, d);
-#if !NORMAL_DEPTH_GRADS
-                        v = select(v, select(select(select(e.x, e.y, i == 13u), e.z, i == 14u), e.w, i == 15u),
-                                   i >= G_NORMAL);
-#endif
+                        let v = proj_component(i, a, b, c, tail);
                         if i < PROJ_VALUES {
                             add_proj(sid * G_STRIDE + i, v);
                         }
@@ -295,7 +296,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #if NORMAL_DEPTH_GRADS
                     for (var i0 = 0u; i0 < CHANNELS; i0 += SG) {
                         let i = i0 + sg_lane;
-                        let v = select(select(select(e.x, e.y, i == 1u), e.z, i == 2u), e.w, i == 3u);
+                        let v = component4(e, i);
                         if i < CHANNELS {
                             add_color(sid * CHANNELS + i, v);
                         }
@@ -313,7 +314,13 @@ const PROJ_VALUES: u32 = 16u;
 const PROJ_VALUES: u32 = 12u + CHANNELS;   // colour gradients in the normal and depth slots
 #endif
 
-// Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main).
+// Component `i` (0-3) of v by selects: an indexed private vector would go to scratch memory on CPU drivers.
+fn component4(v: vec4<f32>, i: u32) -> f32 {
+    return select(select(select(v.x, v.y, i == 1u), v.z, i == 2u), v.w, i == 3u);
+}
+
+// Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main); `d` fills
+// slots 12-15 (normal and depth, or the colours when there are no normal/depth gradients).
 fn proj_component(i: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> f32 {
     var v = a.x;                      // G_T0
     v = select(v, a.y, i == 1u);
