@@ -114,7 +114,8 @@ class Worker:
 
 
 def worker(n: int) -> int:
-    """The baseline side: time one GMA step per request on stdin ("fwd" / "bwd"), print its ms."""
+    """One side (this checkout or the baseline): time one GMA step per request on stdin ("fwd" / "bwd"),
+    print its ms."""
     import gma
 
     root = Path(os.environ["PYTHONPATH"]).resolve()

@@ -124,6 +124,15 @@ class SurfelRasterizer:
             cp.dispatch_workgroups(*groups)
         cp.end()
 
+    @staticmethod
+    def _subgroup_staging(resources: dict, st: ProjectionState | None, empty=None) -> None:
+        """The subgroup rasterizers (forward and backward) stage what projection wrote for them — block
+        bands and colours padded to a vec4 (see rasterize_core.wgsl) — instead of the colours at binding
+        2, which they do not declare. ``st`` None (no surfels): ``empty`` stands in."""
+        del resources[2]
+        resources[14] = st.block_bands if st else empty
+        resources[15] = st.colors4 if st else empty
+
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
                 timer: PassTimer | None = None, keep: bool = True) -> ProjectionState:
         """Encode projection, depth sort and the scan of tile counts in depth order. With ``keep`` the
@@ -208,10 +217,8 @@ class SurfelRasterizer:
         else:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", defines)
             resources = dict(enumerate(inputs + list(target)))
-        if defines["USE_SUBGROUPS"]:  # stages the colours that projection padded (see rasterize_core.wgsl)
-            del resources[2]
-            resources[14] = st.block_bands if n else empty
-            resources[15] = st.colors4 if n else empty
+        if defines["USE_SUBGROUPS"]:
+            self._subgroup_staging(resources, st if n else None, empty)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges
 
@@ -281,9 +288,7 @@ class SurfelRasterizer:
         # slots of v_proj (fewer rounds of atomics, see rasterize_bwd.wgsl); project_bwd copies them out.
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         if defines["USE_SUBGROUPS"]:
-            del resources[2]
-            resources[14] = state.proj.block_bands
-            resources[15] = state.proj.colors4
+            self._subgroup_staging(resources, state.proj)
         if color_in_proj:
             del resources[13]
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
