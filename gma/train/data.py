@@ -48,9 +48,12 @@ def _resize(x: np.ndarray, size: tuple[int, int]) -> torch.Tensor:
     return t[0].permute(1, 2, 0)
 
 
-def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0) -> FrameSet:
+def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0,
+                identity: torch.Tensor | None = None) -> FrameSet:
     """Frames of ``split`` of sequence ``seq`` (``gma.data.Sequence``), resized so the longest side is
-    ``resolution`` (never upscaled); ``max_frames`` > 0 keeps that many, evenly spaced."""
+    ``resolution`` (never upscaled); ``max_frames`` > 0 keeps that many, evenly spaced. ``identity`` [S]
+    replaces the sequence's body identity (phenotype / betas) in every frame: an avatar is posed with the
+    body it was fitted on."""
     idx = seq.split(split)
     if not idx:
         raise ValueError(f"{seq.root}: split {split!r} is empty or missing (splits: {sorted(seq.splits)})")
@@ -70,7 +73,10 @@ def load_frames(seq, body, split: str, resolution: int, max_frames: int = 0) -> 
             K[1] *= sy
             Ks.append(K)
             w2cs.append(torch.as_tensor(w2c, dtype=torch.float32))
-            params = body.check_params(frame_params(seq.body.model, seq.body.frame(i)))
+            params = frame_params(seq.body.model, seq.body.frame(i))
+            if identity is not None:
+                params["shape"] = identity
+            params = body.check_params(params)
             rests.append(body.rest_vertices(params).float())
             bones.append(body.bone_transforms(params).float())
             poses.append(params["pose"].float())
