@@ -10,7 +10,7 @@
 @group(0) @binding(3) var<storage, read> scales: array<f32>;       // [N, 2]
 @group(0) @binding(4) var<storage, read> opacities: array<f32>;    // [N]
 @group(0) @binding(5) var<storage, read_write> projected: array<ProjectedSurfel>;  // [N]
-@group(0) @binding(6) var<storage, read_write> tile_rects: array<vec4<u32>>;      // [N] x0, y0, x1, y1 (incl.)
+@group(0) @binding(6) var<storage, read_write> tile_rects: array<vec4<u32>>;      // [N] see tile_list
 @group(0) @binding(7) var<storage, read_write> tile_counts: array<u32>;           // [N]
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
@@ -118,14 +118,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
-    tile_rects[i] = vec4<u32>(tile_lo, tile_hi);
-    write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi);
+    let bands = write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi);
+    let tiles = tile_list(bands, tile_lo, tile_hi);
+    tile_rects[i] = tiles;
     let nc = params.num_channels;
     let last = nc - 1u;
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
                            select(0.0, colors[i * nc + min(2u, last)], nc > 2u),
                            select(0.0, colors[i * nc + min(3u, last)], nc > 3u));
-    tile_counts[i] = extent.x * extent.y;
+    tile_counts[i] = select(countOneBits(tiles.z), extent.x * extent.y, tiles.w != 0u);
     depth_keys[i] = depth_key(mu_c.z);
     surfel_ids[i] = i;
 }
@@ -193,14 +194,16 @@ fn band_range(f: BlockShape, mu: vec2<f32>, y0: f32, margin: f32) -> vec2<f32> {
 // 32 columns) | the box's first 4-pixel column (x / 4) << 15. y = per band j (5 bits each, from bit
 // 10 j) the first and last column, relative to the box's first, of the pixels whose centres band_range
 // covers within the box (first 31, last 0 when empty); for BIG, the box's last column, for every band.
-fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) {
+// Returns what it wrote.
+fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) -> vec2<u32> {
     let first = u32(p_lo.y) / 8u;
     let nb = u32(p_hi.y) / 8u - first + 1u;
     let col0 = u32(p_lo.x) / 4u;
     let col1 = u32(p_hi.x) / 4u;
     if nb > 3u || col1 - col0 > 31u {
-        block_bands[i] = vec2<u32>(first | (col0 << 15u), col1);
-        return;
+        let box = vec2<u32>(first | (col0 << 15u), col1);
+        block_bands[i] = box;
+        return box;
     }
     let margin = 0.01 + 1e-4 * max(abs(f.ellipse.x), abs(f.ellipse.y));
     var cols = 0u;
@@ -212,7 +215,38 @@ fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2
         let c = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u) - col0;
         cols |= select(31u, c.x | (c.y << 5u), px_lo <= px_hi) << (10u * j);
     }
-    block_bands[i] = vec2<u32>(first | (nb << 13u) | (col0 << 15u), cols);
+    let bands = vec2<u32>(first | (nb << 13u) | (col0 << 15u), cols);
+    block_bands[i] = bands;
+    return bands;
+}
+
+// The tiles that emit_isects.wgsl lists the surfel in: those of its box rectangle [lo, hi] (tile
+// coordinates) that hold a 4x2 block its block bands reach. In the others the surfel has alpha < 1/255
+// at every pixel (the bands are strictly conservative), so images and gradients do not change, save the
+// rounding of sums whose batches shift. A band's columns [a, b] reach tiles a / 4 .. b / 4 of the
+// band's tile row, exactly the tiles where the rasterizers' block_mask (band_columns) is non-zero.
+// Returns x0 | y0 << 16, x1 | y1 << 16, the reached tiles (bit (ty - y0) * 16 + tx - x0), and 1 when
+// every tile of the rectangle is listed (surfels whose bands are their box's, see write_bands).
+// Standard scene (100k surfels, random orientations): 238k -> 224k intersections.
+fn tile_list(bands: vec2<u32>, lo: vec2<u32>, hi: vec2<u32>) -> vec4<u32> {
+    let rect = vec2<u32>(lo.x | (lo.y << 16u), hi.x | (hi.y << 16u));
+    let nb = (bands.x >> 13u) & 3u;
+    if nb == 0u {
+        return vec4<u32>(rect, 0u, 1u);
+    }
+    let first = bands.x & 0x1fffu;
+    let col0 = bands.x >> 15u;
+    var mask = 0u;
+    for (var j = 0u; j < nb; j++) {
+        let a = (bands.y >> (10u * j)) & 31u;
+        let b = (bands.y >> (10u * j + 5u)) & 31u;
+        let t0 = (col0 + a) / (TILE_SIZE / 4u) - lo.x;
+        let t1 = (col0 + b) / (TILE_SIZE / 4u) - lo.x;
+        let row = ((first + j) / (TILE_SIZE / 8u) - lo.y) * 16u;
+        // At most 2 tile rows of at most 9 tiles (3 bands, 32 block columns).
+        mask |= select(0u, ((2u << t1) - 1u) & ~((1u << t0) - 1u), a <= b) << row;
+    }
+    return vec4<u32>(rect, mask, 0u);
 }
 
 // The depth sort's key: DEPTH_KEY_BITS (24) bits, so that the sort takes 6 radix passes instead of 8.
