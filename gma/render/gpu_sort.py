@@ -71,7 +71,7 @@ class RadixSorter:
             encoder.copy_buffer_to_buffer(keys_tmp, 0, keys, 0, 4 * capacity)
             encoder.copy_buffer_to_buffer(vals_tmp, 0, values, 0, 4 * capacity)
 
-    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32):
+    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None):
         """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
         ctx = self.ctx
         keys = np.ascontiguousarray(keys, np.uint32)
@@ -84,6 +84,7 @@ class RadixSorter:
         info = ctx.upload(dispatch_info(n, SORT_BLOCK), "sort.info",
                           wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
         enc = ctx.device.create_command_encoder()
-        self.encode(enc, info, kb, vb, n, bits)
+        based = (ctx.upload(np.array([base], np.uint32), "sort.base"), 0) if base is not None else None
+        self.encode(enc, info, kb, vb, n, bits, base=based)
         ctx.submit(enc)
         return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)
