@@ -218,7 +218,6 @@ class SurfelRasterizer:
         else:  # kept in the ForwardState for the backward pass
             isect_ids = ctx.buffer(4 * cap, "isect_ids")
             ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
-        encoder.clear_buffer(ranges)  # tiles without intersections must read as empty
         if n > 0:
             self._setup(encoder, st, timer)
             emit = ctx.compute_pipeline("render/emit_isects.wgsl")
@@ -226,8 +225,11 @@ class SurfelRasterizer:
                                            st.tile_rects, isect_tiles, isect_ids], ((n + 255) // 256, 1, 1),
                            "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
-            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")
-            self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges], st.elem_info, "bin", timer)
+            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")  # writes every tile's range
+            self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
+                           ((tx * ty + 255) // 256, 1, 1), "bin", timer)
+        else:
+            encoder.clear_buffer(ranges)  # every tile is empty
         defines = self.raster_defines(surfels.channels)
         empty = self.workspace.get("empty", 64)
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
