@@ -96,6 +96,9 @@ class SurfelRasterizer:
         self.scan = ExclusiveScan(ctx, self.workspace)
         self.isect_capacity_hint = 1 << 16
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
+        # Projection's frame stats by subgroup reductions (tests switch this off to exercise the
+        # workgroup-atomics variant that adapters without subgroups run; see project_fwd.wgsl).
+        self.project_subgroups = ctx.has_subgroups
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
         # on GPUs those reads are broadcasts and the plain loop is simpler. The subgroup variant is only
         # validated on lavapipe so far: GMA_RASTER_SUBGROUPS=1 turns it on elsewhere, =0 off. Its loops
@@ -180,7 +183,7 @@ class SurfelRasterizer:
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
-        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.use_subgroups})
+        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups})
         self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
                                     st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats],

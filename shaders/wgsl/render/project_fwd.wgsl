@@ -50,9 +50,9 @@ fn cull(i: u32) {
 
 // Projects surfel gid.x (none past the end) and adds its depth key and tile count to stats.
 #if USE_SUBGROUPS
-// The subgroup variant (CPU drivers, where workgroup atomics are scalar loops over the lanes: three per
-// surfel cost 4.5 ms of the standard scene's 6 ms projection on lavapipe): subgroup reductions, then
-// one lane adds the subgroup's share.
+// With subgroups (chosen by the adapter's feature, not by the rasterizer variant): subgroup reductions,
+// then one lane adds the subgroup's share. On CPU drivers workgroup atomics are scalar loops over the
+// lanes: three per surfel cost 4.5 ms of the standard scene's 6 ms projection on lavapipe.
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
     let r = project_if_any(gid.x);
