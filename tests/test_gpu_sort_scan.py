@@ -22,6 +22,27 @@ def test_radix_sort_equals_stable_argsort(gpu, n, bits, high):
     np.testing.assert_array_equal(sorted_keys, keys[want])
 
 
+@pytest.mark.parametrize("n", [5, 50_000])
+def test_radix_sort_from_a_base_orders_the_keys_above_it(gpu, n):
+    # Keys within 2^18 above a base, across a power of two (as the depth keys of a frame): 18 bits of
+    # key - base order them as all 32 bits would.
+    rng = np.random.default_rng(n)
+    base = (1 << 22) - 5000
+    keys = (base + rng.integers(0, 1 << 18, n)).astype(np.uint32)
+    keys[:2] = [base, base + (1 << 18) - 1]
+    sorted_keys, order = RadixSorter(gpu).sort(keys, bits=18, base=base)
+    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+
+
+def test_depth_key_bits():
+    from gma.render.rasterizer import depth_key_bits
+
+    assert depth_key_bits(np.array([0, 0, 0xFFFFFFFF, 0], np.uint32)) == 1   # nothing listed
+    assert depth_key_bits(np.array([0, 7, 100, 100], np.uint32)) == 1
+    assert depth_key_bits(np.array([0, 7, (1 << 22) - 1, 1 << 22], np.uint32)) == 1
+    assert depth_key_bits(np.array([0, 7, 4178575, 4440715], np.uint32)) == 18
+
+
 def test_radix_sort_carries_values(gpu):
     keys = np.array([5, 1, 5, 0, 1], np.uint32)
     values = np.array([10, 11, 12, 13, 14], np.uint32)

@@ -124,3 +124,23 @@ def test_plain_and_subgroup_variants_agree(gpu):
         outs.append(read_outputs(gpu, st))
     for name in ("color", "alpha", "normal", "depth"):
         np.testing.assert_allclose(getattr(outs[0], name), getattr(outs[1], name), atol=1e-5)
+
+
+def test_projection_stats_variants_agree(gpu):
+    """Projection's frame stats (intersections wanted, smallest and largest listed depth key) are the
+    same from subgroup reductions and from workgroup atomics, and match the tile counts it wrote."""
+    if not gpu.has_subgroups:
+        pytest.skip("adapter has no subgroups")
+    scene = torch_scene(3000, seed=4)
+    cam = default_camera(96, 64)
+    arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
+    results = []
+    for use in (False, True):
+        rast = SurfelRasterizer(gpu)
+        rast.project_subgroups = use
+        st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
+        stats = gpu.read(st.proj.stats, np.uint32, 4)
+        counts = gpu.read(st.proj.tile_counts, np.uint32, 3000)
+        assert stats[1] == counts.sum() == st.num_isects
+        results.append(stats[1:])
+    np.testing.assert_array_equal(results[0], results[1])

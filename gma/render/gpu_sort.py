@@ -34,28 +34,35 @@ class RadixSorter:
         self.workspace = workspace or Workspace(ctx)
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
-               values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None) -> None:
-        """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside)."""
+               values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,
+               base: tuple[wgpu.GPUBuffer, int] | None = None) -> None:
+        """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside). With
+        ``base`` (a buffer and the index of a u32 in it) the sort orders ``key - base`` by its low ``bits``
+        (wrapping), for keys that lie within ``2**bits`` above the base."""
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
+        based = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
+        extra = [base[0]] if base else []
         hist = self.workspace.get("sort.hist", (4 << RADIX_BITS) * sort_blocks(capacity))
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
-        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
+        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i, **based})
+                   for i in range(passes)]
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0})
-        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i}) for i in range(passes)]
+        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i, **based})
+                     for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])
         for i in range(passes):
             cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)
             cp.set_pipeline(count_p[i])
-            cp.set_bind_group(0, ctx.bind_group(count_p[i], [info, src[0], hist]))
+            cp.set_bind_group(0, ctx.bind_group(count_p[i], [info, src[0], hist] + extra))
             cp.dispatch_workgroups_indirect(info, 0)
             cp.set_pipeline(scan_p)
             cp.set_bind_group(0, scan_bg)
             cp.dispatch_workgroups(1)
             cp.set_pipeline(scatter_p[i])
-            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]]))
+            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]] + extra))
             cp.dispatch_workgroups_indirect(info, 0)
             cp.end()
             src, dst = dst, src
@@ -64,7 +71,7 @@ class RadixSorter:
             encoder.copy_buffer_to_buffer(keys_tmp, 0, keys, 0, 4 * capacity)
             encoder.copy_buffer_to_buffer(vals_tmp, 0, values, 0, 4 * capacity)
 
-    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32):
+    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None):
         """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
         ctx = self.ctx
         keys = np.ascontiguousarray(keys, np.uint32)
@@ -77,6 +84,7 @@ class RadixSorter:
         info = ctx.upload(dispatch_info(n, SORT_BLOCK), "sort.info",
                           wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
         enc = ctx.device.create_command_encoder()
-        self.encode(enc, info, kb, vb, n, bits)
+        based = (ctx.upload(np.array([base], np.uint32), "sort.base"), 0) if base is not None else None
+        self.encode(enc, info, kb, vb, n, bits, base=based)
         ctx.submit(enc)
         return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)

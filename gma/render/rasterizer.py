@@ -1,7 +1,8 @@
 """The forward surfel rasterizer: projection, depth sort, tile binning, tile sort, tiled compositing.
 
-Every pass runs on the GPU; the only host round trip in :meth:`SurfelRasterizer.forward` is reading the
-number of tile intersections so that the intersection buffers are sized exactly. The texture path
+Every pass runs on the GPU; the only host round trip in :meth:`SurfelRasterizer.forward` is reading, after
+projection, the number of tile intersections (so that the intersection buffers are sized exactly) and
+the range of the depth keys (so that the depth sort runs only the radix passes that range needs). The texture path
 (:meth:`render_to_texture`) avoids even that by using a capacity that grows from earlier frames.
 """
 
@@ -44,7 +45,7 @@ class ProjectionState:
     depth_keys: wgpu.GPUBuffer    # [N] sorted
     depth_order: wgpu.GPUBuffer   # [N] surfel ids, front to back
     isect_offsets: wgpu.GPUBuffer  # [N] exclusive scan of tile counts in depth order
-    stats: wgpu.GPUBuffer         # [4] u32: [0] intersections wanted
+    stats: wgpu.GPUBuffer         # [4] u32: [0], [1] intersections wanted, [2] min and [3] max depth key
     sort_info: wgpu.GPUBuffer     # DispatchInfo of the intersection sort (count clamped to capacity)
     elem_info: wgpu.GPUBuffer     # DispatchInfo of per-intersection passes
 
@@ -73,6 +74,17 @@ def _bits_for(count: int) -> int:
     return max(1, math.ceil(math.log2(max(count, 2))))
 
 
+def depth_key_bits(stats: np.ndarray) -> int:
+    """Bits of ``key - min`` that the depth sort must order, from projection's ``stats`` (see
+    project_fwd.wgsl): the keys of all surfels listed in some tile lie in [min, max], so a stable sort
+    of ``key - min`` by its low ``(max - min).bit_length()`` bits orders them exactly as the full key
+    would: same order, images bit-identical. Surfels in no tile (culled ones included) land anywhere:
+    they emit no intersection. Standard scene (depths 2.5-3.5): 18 bits, 5 radix passes instead of 6."""
+    if stats[1] == 0:
+        return 1
+    return max(1, (int(stats[3]) - int(stats[2])).bit_length())
+
+
 class SurfelRasterizer:
     """Renders :class:`SurfelBuffers` for a :class:`Camera`. Pipelines are compiled once per context
     and variant (channel count, batch size); a frame compiles nothing."""
@@ -84,6 +96,9 @@ class SurfelRasterizer:
         self.scan = ExclusiveScan(ctx, self.workspace)
         self.isect_capacity_hint = 1 << 16
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
+        # Projection's frame stats by subgroup reductions (tests switch this off to exercise the
+        # workgroup-atomics variant that adapters without subgroups run; see project_fwd.wgsl).
+        self.project_subgroups = ctx.has_subgroups
         # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
         # on GPUs those reads are broadcasts and the plain loop is simpler. The subgroup variant is only
         # validated on lavapipe so far: GMA_RASTER_SUBGROUPS=1 turns it on elsewhere, =0 off. Its loops
@@ -135,8 +150,8 @@ class SurfelRasterizer:
 
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
                 timer: PassTimer | None = None, keep: bool = True) -> ProjectionState:
-        """Encode projection, depth sort and the scan of tile counts in depth order. With ``keep`` the
-        buffers the backward pass reads are allocated for this call; the rest is workspace scratch."""
+        """Encode projection (then :meth:`depth_order` sorts). With ``keep`` the buffers the backward pass
+        reads are allocated for this call; the rest is workspace scratch."""
         ctx, n = self.ctx, surfels.count
         if n > MAX_WORKGROUPS * 256:
             raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
@@ -165,19 +180,27 @@ class SurfelRasterizer:
             elem_info=scratch("isect_elem.info", 16, INDIRECT),
         )
         ctx.write(st.params, params)
+        ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
-        p = ctx.compute_pipeline("render/project_fwd.wgsl")
+        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups})
         self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
-                                    st.depth_order, st.block_bands, surfels.colors, st.colors4],
+                                    st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats],
                        ((n + 255) // 256, 1, 1), "project", timer)
-        depth_info = scratch("depth_sort.info", 16, INDIRECT)
-        ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
-        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, DEPTH_KEY_BITS, timer)
-        self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
-        self._setup(encoder, st, timer)
         return st
+
+    def depth_order(self, encoder, st: ProjectionState, n: int, key_bits: int = DEPTH_KEY_BITS,
+                    timer: PassTimer | None = None) -> None:
+        """Encode the depth sort by the low ``key_bits`` of ``key - min key`` (see :func:`depth_key_bits`)
+        and the scan of tile counts in depth order."""
+        if n == 0:
+            return
+        depth_info = self.workspace.get("depth_sort.info", 16, INDIRECT)
+        self.ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
+        self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, key_bits, timer,
+                           base=(st.stats, 2))
+        self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
 
     def _setup(self, encoder, st: ProjectionState, timer) -> None:
         setup = self.ctx.compute_pipeline("render/isect_setup.wgsl")
@@ -198,16 +221,18 @@ class SurfelRasterizer:
         else:  # kept in the ForwardState for the backward pass
             isect_ids = ctx.buffer(4 * cap, "isect_ids")
             ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
-        encoder.clear_buffer(ranges)  # tiles without intersections must read as empty
         if n > 0:
-            self._setup(encoder, st, timer)  # again: the capacity may have been raised since projection
+            self._setup(encoder, st, timer)
             emit = ctx.compute_pipeline("render/emit_isects.wgsl")
             self._dispatch(encoder, emit, [st.params, st.depth_order, st.isect_offsets, st.tile_counts,
                                            st.tile_rects, isect_tiles, isect_ids], ((n + 255) // 256, 1, 1),
                            "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
-            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")
-            self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges], st.elem_info, "bin", timer)
+            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")  # writes every tile's range
+            self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
+                           ((tx * ty + 255) // 256, 1, 1), "bin", timer)
+        else:
+            encoder.clear_buffer(ranges)  # every tile is empty
         defines = self.raster_defines(surfels.channels)
         empty = self.workspace.get("empty", 64)
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
@@ -227,14 +252,16 @@ class SurfelRasterizer:
                 timer: PassTimer | None = None) -> ForwardState:
         """Render into freshly allocated output buffers (read them with :func:`read_outputs`).
 
-        Two submissions: projection/depth sort/scan, then (after reading the intersection count, the
-        one host round trip) binning, tile sort and rasterization into exactly sized buffers."""
+        Two submissions: projection, then (after reading the intersection count and the depth keys'
+        range, the one host round trip) depth sort, scan, binning, tile sort and rasterization into
+        exactly sized buffers."""
         ctx, n, c = self.ctx, surfels.count, surfels.channels
         bg = np.zeros(c, np.float32) if background is None else np.asarray(background, np.float32)
         enc = ctx.device.create_command_encoder()
         st = self.project(enc, surfels, camera, 0, timer)
         ctx.submit(enc)
-        num_isects = int(ctx.read(st.stats, np.uint32, 1)[0]) if n else 0
+        stats = ctx.read(st.stats, np.uint32, 4) if n else np.zeros(4, np.uint32)
+        num_isects = int(stats[1])
         ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
         hw = camera.width * camera.height
         outputs = [ctx.buffer(4 * hw * c, "out.color"), ctx.buffer(4 * hw, "out.alpha"),
@@ -242,6 +269,7 @@ class SurfelRasterizer:
                    ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")]
         background_buf = ctx.upload(bg, "background")
         enc = ctx.device.create_command_encoder()
+        self.depth_order(enc, st, n, depth_key_bits(stats), timer)
         isect_ids, ranges = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
                                                    outputs, timer)
         if timer:
@@ -321,6 +349,7 @@ class SurfelRasterizer:
         enc = self.ctx.device.create_command_encoder()
         cap = self.isect_capacity_hint
         st = self.project(enc, surfels, camera, cap, timer, keep=False)
+        self.depth_order(enc, st, surfels.count, DEPTH_KEY_BITS, timer)  # no readback: every key bit
         self.bin_and_rasterize(enc, surfels, camera, st, cap, background, view, timer)
         if timer:
             timer.resolve(enc)

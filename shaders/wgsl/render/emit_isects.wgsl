@@ -1,13 +1,14 @@
 // Intersection emission: thread i handles the i-th surfel in depth order and writes one (tile, surfel)
 // pair per tile of its rectangle at its scanned offset. Emitting in depth order means a stable sort by
-// tile alone leaves each tile's list sorted front to back.
+// tile alone leaves each tile's list sorted front to back. A surfel is listed in the tiles of its box
+// rectangle that its footprint reaches (tile_list in project_fwd.wgsl).
 #include "common/render_types.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
 @group(0) @binding(1) var<storage, read> sorted_ids: array<u32>;    // [N] depth order
 @group(0) @binding(2) var<storage, read> offsets: array<u32>;       // [N] depth order
 @group(0) @binding(3) var<storage, read> tile_counts: array<u32>;   // [N] by surfel id
-@group(0) @binding(4) var<storage, read> tile_rects: array<vec4<u32>>;
+@group(0) @binding(4) var<storage, read> tile_rects: array<vec4<u32>>;   // [N] see tile_list
 @group(0) @binding(5) var<storage, read_write> isect_tiles: array<u32>;
 @group(0) @binding(6) var<storage, read_write> isect_ids: array<u32>;
 
@@ -21,11 +22,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if tile_counts[sid] == 0u {
         return;
     }
-    let rect = tile_rects[sid];
+    let tiles = tile_rects[sid];
+    let lo = vec2<u32>(tiles.x & 0xffffu, tiles.x >> 16u);
+    let hi = vec2<u32>(tiles.y & 0xffffu, tiles.y >> 16u);
     var out = offsets[i];
     let cap = params.isect_capacity;
-    for (var ty = rect.y; ty <= rect.w; ty++) {
-        for (var tx = rect.x; tx <= rect.z; tx++) {
+    for (var ty = lo.y; ty <= hi.y; ty++) {
+        for (var tx = lo.x; tx <= hi.x; tx++) {
+            if tiles.w == 0u && ((tiles.z >> ((ty - lo.y) * 16u + tx - lo.x)) & 1u) == 0u {
+                continue;
+            }
             if out >= cap {
                 return;
             }

@@ -184,6 +184,123 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
     return w * (*r).v_col;
 }
 
+// Add a hit's gradient totals over the subgroup to surfel `sid`'s gradients: a, b, c (the packed
+// projection values, see proj_component), d (normal, depth), e (colours), one lane's share each.
+// Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than log2(SG) xor-shuffles
+// of packed vec4s.
+fn flush_butterfly(sid: u32, a_in: vec4<f32>, b_in: vec4<f32>, c_in: vec4<f32>, d_in: vec4<f32>,
+                   e_in: vec4<f32>, sg_lane: u32) {
+    var a = a_in;
+    var b = b_in;
+    var c = c_in;
+    var d = d_in;
+    var e = e_in;
+    for (var off = SG / 2u; off > 0u; off >>= 1u) {
+        a += subgroupShuffleXor(a, off);
+        b += subgroupShuffleXor(b, off);
+        c += subgroupShuffleXor(c, off);
+#if NORMAL_DEPTH_GRADS
+        d += subgroupShuffleXor(d, off);
+#endif
+        e += subgroupShuffleXor(e, off);
+    }
+    // Every lane holds the totals (butterfly); lane i adds value i, i + SG, ... Lavapipe runs each
+    // atomic as a loop over the lanes, so one lane adding all 15-19 values paid (as far as we can tell)
+    // that loop 8 times per value with one lane active; spread, each loop does up to 8 adds.
+    // Values are picked by selects (an indexed private array would go to scratch). Same adds,
+    // bit-identical gradients; standard scene, 100k surfels, same runs against the lane-0 flush: this
+    // pass -22 % (load 1.8-2.1). (An earlier spread, 401 against 372 ms, predates the hit lists; how it
+    // picked the values is not recorded.)
+    // Without normal and depth gradients their slots (12-15) carry the colour gradients (copied out by
+    // project_bwd): 15 values in two rounds of adds instead of three (this pass -4 to -8 %, standard
+    // scene, 100k surfels, same runs, load 0.9-1.4).
+#if NORMAL_DEPTH_GRADS
+    let tail = d;
+#else
+    let tail = e;   // the colour gradients, in the normal and depth slots
+#endif
+    for (var i0 = 0u; i0 < PROJ_VALUES; i0 += SG) {
+        let i = i0 + sg_lane;
+        let v = proj_component(i, a, b, c, tail);
+        if i < PROJ_VALUES {
+            add_proj(sid * G_STRIDE + i, v);
+        }
+    }
+#if NORMAL_DEPTH_GRADS
+    for (var i0 = 0u; i0 < CHANNELS; i0 += SG) {
+        let i = i0 + sg_lane;
+        let v = component4(e, i);
+        if i < CHANNELS {
+            add_color(sid * CHANNELS + i, v);
+        }
+    }
+#endif
+}
+
+// flush_butterfly for 8 lanes: a reduce-scatter instead of an all-reduce, as each lane adds only a few
+// totals. The 16 projection values (V0-3 = a, V4-7 = b, V8-11 = c, V12-15 = `tail`: the normal and
+// depth gradients, or without those the colours): each round halves what a lane keeps and sends the
+// other half to its partner, 8 + 4 + 2 scalar shuffles instead of 3 x 16, and lane l ends with the
+// totals of V[l] and V[l + 8]. With normal and depth gradients the colours (`e`) follow in 2 + 1 + 1
+// instead of 3 x 4. The partners add the same operands in the same order (own + partner's) as the
+// butterfly, so the totals and the gradients are bit-identical. (Standard scene, 100k surfels,
+// lavapipe, same runs, without normal/depth gradients: this pass -8 to -15 %.)
+fn flush_scattered8(sid: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, tail: vec4<f32>, e: vec4<f32>,
+                    sg_lane: u32) {
+    let e_total = scatter_colors8(e, sg_lane);
+    let slot0 = value_slot(sg_lane);
+    let slot1 = value_slot(sg_lane + 8u);
+    let t = scatter16(a, b, c, tail, sg_lane);
+    add_proj(sid * G_STRIDE + slot0, t.x);
+    if slot1 < PROJ_VALUES {
+        add_proj(sid * G_STRIDE + slot1, t.y);
+    }
+#if NORMAL_DEPTH_GRADS
+    // Lanes 0, 2, 4, 6 hold the totals of colours 0-3 (scatter_colors8).
+    let ch = sg_lane >> 1u;
+    if (sg_lane & 1u) == 0u && ch < CHANNELS {
+        add_color(sid * CHANNELS + ch, e_total);
+    }
+#endif
+}
+
+// Totals over 8 lanes of V0-15 (V0-3 = a, V4-7 = b, V8-11 = c, V12-15 = d), reduce-scattered: lane l
+// gets those of V[l] (.x) and V[l + 8] (.y). Rounds over lane bits 2, 1, 0, as the butterfly's.
+fn scatter16(a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>, sg_lane: u32) -> vec2<f32> {
+    let hi2 = (sg_lane & 4u) != 0u;   // keep V[4 hi2 + 0..3] and V[8 + 4 hi2 + 0..3]
+    let r0 = select(a, b, hi2) + subgroupShuffleXor(select(b, a, hi2), 4u);
+    let r1 = select(c, d, hi2) + subgroupShuffleXor(select(d, c, hi2), 4u);
+    let hi1 = (sg_lane & 2u) != 0u;   // then the pair (lane & 6) + 0..1 of each
+    let lo_pairs = vec4<f32>(r0.xy, r1.xy);
+    let hi_pairs = vec4<f32>(r0.zw, r1.zw);
+    let r2 = select(lo_pairs, hi_pairs, hi1) + subgroupShuffleXor(select(hi_pairs, lo_pairs, hi1), 2u);
+    let hi0 = (sg_lane & 1u) != 0u;   // then the one value: V[lane], V[lane + 8]
+    return select(r2.xz, r2.yw, hi0) + subgroupShuffleXor(select(r2.yw, r2.xz, hi0), 1u);
+}
+
+// Totals over 8 lanes of the four colours in e, reduce-scattered: lane l gets that of colour l / 2
+// (lane bits 2 and 1 pick it; lanes l and l ^ 1 end equal). Rounds over lane bits 2, 1, 0, as the
+// butterfly's. Unused (constant 0) without normal and depth gradients.
+fn scatter_colors8(e: vec4<f32>, sg_lane: u32) -> f32 {
+#if NORMAL_DEPTH_GRADS
+    let hi2 = (sg_lane & 4u) != 0u;   // keep colours 2 hi2 + 0..1
+    let r = select(e.xy, e.zw, hi2) + subgroupShuffleXor(select(e.zw, e.xy, hi2), 4u);
+    let hi1 = (sg_lane & 2u) != 0u;   // then colour 2 hi2 + hi1
+    let v = select(r.x, r.y, hi1) + subgroupShuffleXor(select(r.y, r.x, hi1), 2u);
+    return v + subgroupShuffleXor(v, 1u);
+#else
+    return 0.0;
+#endif
+}
+
+// The G_* slot (see proj_component) of value V[j] of flush_scattered8: the vectors' xyz are the T rows,
+// a.w the opacity, b.w and c.w the centre; V12-15 stay (the tail: normal and depth, or the colours).
+fn value_slot(j: u32) -> u32 {
+    let v = j >> 2u;
+    let w_slot = select(select(11u, 9u, v == 1u), 10u, v == 2u);
+    return select(select(3u * v + (j & 3u), w_slot, (j & 3u) == 3u), j, j >= 12u);
+}
+
 @compute @workgroup_size(64)   // RASTER_THREADS
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
@@ -254,54 +371,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                     let s_hu = cross(ca.h_v, q.v_p) + cross(s.t2.xyz, q.v_p_dy);
                     let s_hv = cross(q.v_p, ca.h_u);
                     let v_t2 = pa.px.x * s_hu + pa.px.y * s_hv + cross(q.v_p_dy, ca.h_u);
-                    // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than
-                    // log2(SG) xor-shuffles of packed vec4s.
-                    var a = vec4<f32>(-s_hu, q.v_opacity);
-                    var b = vec4<f32>(-s_hv, q.v_mu2d.x);
-                    var c = vec4<f32>(v_t2, q.v_mu2d.y);
-                    var d = q.v_nd;
-                    var e = g_col;
-                    for (var off = SG / 2u; off > 0u; off >>= 1u) {
-                        a += subgroupShuffleXor(a, off);
-                        b += subgroupShuffleXor(b, off);
-                        c += subgroupShuffleXor(c, off);
+                    let a = vec4<f32>(-s_hu, q.v_opacity);
+                    let b = vec4<f32>(-s_hv, q.v_mu2d.x);
+                    let c = vec4<f32>(v_t2, q.v_mu2d.y);
 #if NORMAL_DEPTH_GRADS
-                        d += subgroupShuffleXor(d, off);
-#endif
-                        e += subgroupShuffleXor(e, off);
-                    }
-                    // Every lane holds the totals (butterfly); lane i adds value i, i + SG, ... Lavapipe
-                    // runs each atomic as a loop over the lanes, so one lane adding all 15-19 values paid
-                    // (as far as we can tell) that loop 8 times per value with one lane active; spread, each
-                    // loop does up to 8 adds.
-                    // Values are picked by selects (an indexed private array would go to scratch). Same
-                    // adds, bit-identical gradients; standard scene, 100k surfels, same runs against the
-                    // lane-0 flush: this pass -22 % (load 1.8-2.1). (An earlier spread, 401 against 372
-                    // ms, predates the hit lists; how it picked the values is not recorded.)
-                    // Without normal and depth gradients their slots (12-15) carry the colour gradients
-                    // (copied out by project_bwd): 15 values in two rounds of adds instead of three
-                    // (this pass -4 to -8 %, standard scene, 100k surfels, same runs, load 0.9-1.4).
-#if NORMAL_DEPTH_GRADS
-                    let tail = d;
+                    let tail = q.v_nd;
 #else
-                    let tail = e;   // the colour gradients, in the normal and depth slots
+                    let tail = g_col;   // the colour gradients, in the normal and depth slots
 #endif
-                    for (var i0 = 0u; i0 < PROJ_VALUES; i0 += SG) {
-                        let i = i0 + sg_lane;
-                        let v = proj_component(i, a, b, c, tail);
-                        if i < PROJ_VALUES {
-                            add_proj(sid * G_STRIDE + i, v);
-                        }
+                    if SG == 8u {   // constant after inlining
+                        flush_scattered8(sid, a, b, c, tail, g_col, sg_lane);
+                    } else {
+                        flush_butterfly(sid, a, b, c, q.v_nd, g_col, sg_lane);
                     }
-#if NORMAL_DEPTH_GRADS
-                    for (var i0 = 0u; i0 < CHANNELS; i0 += SG) {
-                        let i = i0 + sg_lane;
-                        let v = component4(e, i);
-                        if i < CHANNELS {
-                            add_color(sid * CHANNELS + i, v);
-                        }
-                    }
-#endif
                 }
             }
         }

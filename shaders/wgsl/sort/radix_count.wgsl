@@ -8,6 +8,9 @@
 @group(0) @binding(0) var<storage, read> info: DispatchInfo;   // groups_x = num_blocks, count = keys
 @group(0) @binding(1) var<storage, read> keys: array<u32>;
 @group(0) @binding(2) var<storage, read_write> hist: array<u32>;
+#if KEY_BASE
+@group(0) @binding(3) var<storage, read> key_base: array<u32>;   // see key_offset
+#endif
 
 var<workgroup> block_hist: array<atomic<u32>, RADIX>;
 
@@ -20,11 +23,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let count = info.count;
     let block = wg.x;
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
+    let base = key_offset();
     var counts = vec4<u32>(0u);   // per digit (radix_digits.wgsl)
     for (var i = 0u; i < SORT_ITEMS; i++) {
         let idx = start + i;
         if idx < count {
-            add_digit(&counts, key_digit(keys[idx]));
+            add_digit(&counts, key_digit(keys[idx], base));
         }
     }
     for (var d = 0u; d < RADIX; d++) {
