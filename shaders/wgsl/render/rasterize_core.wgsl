@@ -163,10 +163,6 @@ fn tile_pixel(lid: u32) -> vec2<u32> {
     return vec2<u32>((lid & 3u) | ((lid >> 1u) & 12u), ((lid >> 2u) & 1u) | ((lid >> 4u) & 14u));
 }
 
-fn tile_origin(tile: u32) -> vec2<f32> {
-    return vec2<f32>(f32((tile % params.tile_grid.x) * TILE_SIZE), f32((tile / params.tile_grid.x) * TILE_SIZE));
-}
-
 // Copy surfel `sid` into batch slot `slot` (colours padded to vec4 chunks, block mask when needed).
 fn stage_surfel(slot: u32, sid: u32, tile: u32) {
     batch_surf[slot] = projected[sid];
