@@ -209,6 +209,8 @@ CASES = [
     Case("eval an avatar without body metadata", _avatar_without_body, "nobody.gma"),
     Case("eval random bytes as an avatar",
          lambda t, s, a: ["eval", str(_ply(t / "r.gma", "garbage")), str(s)], "r.gma"),
+    Case("eval a split the sequence lacks", lambda t, s, a: ["eval", str(a), str(s), "--split", "nosuch"],
+         "'nosuch'"),
     # gma render
     Case("render --fps 0", lambda t, s, a: ["render", "body:anny", "-o", str(t / "o.mp4"), "--fps", "0"], "--fps",
          argparse=True),

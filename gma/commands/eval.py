@@ -52,6 +52,10 @@ def run(args: argparse.Namespace) -> int:
     splits = [args.split]
     if args.split == "test" and not seq.split("test"):
         splits = list(EVAL_SPLITS)
+    if not any(seq.split(s) for s in splits):  # else nothing would be scored, and the run would look fine
+        have = sorted(k for k, v in seq.splits.items() if v)
+        raise InputError(f"{seq.root}: no frames in split {args.split!r} (this sequence has: "
+                         f"{', '.join(have) or 'no splits'}); choose one with --split")
     if args.refine_poses < 0:
         raise InputError(f"--refine-poses: expected a number of steps >= 0, got {args.refine_poses}")
     results = evaluate_splits(avatar, seq, splits, out, args.resolution, args.background, images=args.images,
