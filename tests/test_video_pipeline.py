@@ -111,6 +111,20 @@ def test_swaps_resolved_on_a_turn():
     assert not resolve_swaps(p3, found, face).any()
 
 
+def test_no_swaps_when_the_face_detector_barely_works():
+    # A full turn read correctly by MediaPipe, at a resolution where the face detector found a face in
+    # one frame of 24 (a 256 px synthetic clip did exactly that): frames without a face must not be
+    # read as back views, or the last frames of the turn come out mirrored.
+    from gma.video.swaps import resolve_swaps
+
+    yaws = np.radians(np.arange(0, 360, 15))
+    p3 = np.stack([_torso(y) for y in yaws])
+    found = np.ones(len(yaws), bool)
+    face = np.zeros(len(yaws), bool)
+    face[3] = True
+    assert not resolve_swaps(p3, found, face).any()
+
+
 # -- body fit against exact landmarks ---------------------------------------------------------------
 @pytest.mark.slow
 def test_fit_recovers_gt_landmarks(synth_clip, rig):

@@ -9,8 +9,8 @@ Which one holds is decided over the whole clip by dynamic programming on the bod
 (yaw) from the 3D landmarks: h1 turns a yaw θ into π − θ. The cost prefers a yaw that changes at a
 steady rate (a person turning keeps turning; a second difference is cheap only then), h0 over h1 by a
 small margin, a yaw facing the camera whenever MediaPipe found a face (no face is seen from behind),
-and — in clips where faces are found at all, so the face detector works at this resolution — a yaw
-facing away when no face is found.
+and — in clips where the face detector works at this resolution (faces in at least ``MIN_FACE_SHARE``
+of the frames) — a yaw facing away when no face is found.
 """
 
 from __future__ import annotations
@@ -22,6 +22,11 @@ from gma.video.landmarks import POSE_FLIP
 __all__ = ["apply_swaps", "facing_yaw", "resolve_swaps"]
 
 _L_SH, _R_SH, _L_HIP, _R_HIP = 11, 12, 23, 24
+# Share of frames with a face from which "no face" counts as evidence of a back view. A turning person
+# faces the camera in about half the frames (the iPER turn: faces in 23 of 53); a detector that finds
+# one face in 24 frames (a 256 px synthetic turn) is not working, and trusting its silence there read
+# the last five frames of the turn as back views: mirrored bodies, joints 13-48 px off.
+MIN_FACE_SHARE = 0.2
 
 
 def facing_yaw(pose3d: np.ndarray) -> np.ndarray:
@@ -54,7 +59,7 @@ def resolve_swaps(pose3d: np.ndarray, found: np.ndarray, face: np.ndarray, swap_
     unary[:, 1] += swap_cost
     has_face = face[t_all]
     unary[has_face] += face_cost * (np.abs(yaws[has_face]) > np.pi / 2)
-    if has_face.any():
+    if has_face.mean() >= MIN_FACE_SHARE:
         unary[~has_face] += no_face_cost * (np.abs(yaws[~has_face]) < np.pi / 3)
     n = len(t_all)
     if n == 1:
