@@ -45,6 +45,40 @@ def _points_uv(rig, seq, frame_cams) -> np.ndarray:
     return np.stack(out)
 
 
+def _angles(R: np.ndarray) -> np.ndarray:
+    """Rotation angles (degrees) of rotation matrices [..., 3, 3]."""
+    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
+
+
+def _orientation_errors(body, est, gt) -> tuple[float, float]:
+    """Mean errors (degrees) of two orientations against the truth, over the frames:
+
+    - the root's, in the body's frame, around its mean: a constant offset commutes with a turn in place
+      and costs the avatar nothing, what varies from frame to frame blurs it;
+    - the head's relative to the upper spine (a head turned against the torso)."""
+    def rotations(seq, frames):
+        pose = seq.body.arrays["pose"][frames]
+        shape = torch.as_tensor(seq.body.arrays["phenotype"]).float()
+        spine, head = body.bone_index("spine01"), body.bone_index("head")
+        rel = []
+        with torch.no_grad():
+            for p in pose:
+                g = body.bone_transforms(body.check_params({"pose": torch.as_tensor(p), "shape": shape})).double()
+                rel.append((g[spine, :3, :3].T @ g[head, :3, :3]).numpy())
+        cams = np.stack([seq.cameras.frame(i)[1][:3, :3] for i in frames])
+        return cams @ pose[:, 0, :3, :3].astype(np.float64), np.stack(rel)
+
+    frames = list(range(len(gt)))
+    root_e, head_e = rotations(est, frames)
+    root_g, head_g = rotations(gt, frames)
+    err = np.swapaxes(root_g, -1, -2) @ root_e                      # body-frame root error per frame
+    u, _, vt = np.linalg.svd(err.sum(0))
+    mean = u @ vt                                                    # its mean rotation (chordal)
+    root = _angles(err @ mean.T).mean()
+    head = _angles(head_e @ np.swapaxes(head_g, -1, -2)).mean()
+    return float(root), float(head)
+
+
 def _run(clip: Path, out: Path, focal, anny, sheet: str | None):
     from gma.video import VideoImportConfig, estimate_sequence
 
@@ -108,6 +142,8 @@ def main(argv=None) -> int:
         ious = [mask_iou(seq.mask(i) > 0.5, gt.mask(i) > 0.5) for i in range(len(gt))]
         print(f"  vs truth: joint error mean {err.mean():.2f} px, median {np.median(err):.2f}, "
               f"90th pct {np.percentile(err, 90):.2f} px; MediaPipe mask IoU vs true mask {np.mean(ious):.3f}")
+        root, head = _orientation_errors(anny, seq, gt)
+        print(f"  root orientation error around its mean {root:.2f} deg, head-to-spine error {head:.2f} deg")
         print(f"  true phenotype {np.round(gt.body.arrays['phenotype'], 3).tolist()}")
     if args.iper:
         if not IPER.is_file():
