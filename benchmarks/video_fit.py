@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import roma
 import torch
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,11 +44,6 @@ def _points_uv(rig, seq, frame_cams) -> np.ndarray:
         K, w2c = (torch.as_tensor(a).float() for a in frame_cams(t))
         out.append(project(pts[t], K, w2c[:3, :3], w2c[:3, 3]).numpy())
     return np.stack(out)
-
-
-def _angles(R: np.ndarray) -> np.ndarray:
-    """Rotation angles (degrees) of rotation matrices [..., 3, 3]."""
-    return np.degrees(np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
 
 
 def _orientation_errors(body, est, gt) -> tuple[float, float]:
@@ -74,8 +70,8 @@ def _orientation_errors(body, est, gt) -> tuple[float, float]:
     err = np.swapaxes(root_g, -1, -2) @ root_e                      # body-frame root error per frame
     u, _, vt = np.linalg.svd(err.sum(0))
     mean = u @ vt                                                    # its mean rotation (chordal)
-    root = _angles(err @ mean.T).mean()
-    head = _angles(head_e @ np.swapaxes(head_g, -1, -2)).mean()
+    root = roma.rotmat_geodesic_distance(torch.from_numpy(err), torch.from_numpy(mean)).rad2deg().mean()
+    head = roma.rotmat_geodesic_distance(torch.from_numpy(head_e), torch.from_numpy(head_g)).rad2deg().mean()
     return float(root), float(head)
 
 

@@ -224,11 +224,11 @@ def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = Fa
     results = _refinement_rows(seq, work, "iper", steps, body, ctx)
     _figure(work, results, figure)
     if interleaved:
-        test = [i for i in range(n) if i % 4 == 2]
-        print(f"\niper_turn_512.gif, every fourth frame held out ({len(test)} frames, views between training views)")
+        seq = _interleaved_copy(seq_dir, work / "iper_interleaved", n)
+        print(f"\niper_turn_512.gif, every fourth frame held out ({len(seq.split('test'))} frames, views between "
+              "training views)")
         print(_header())
-        _refinement_rows(_interleaved_copy(seq_dir, work / "iper_interleaved", n), work, "iper_interleaved", steps,
-                         body, ctx)
+        _refinement_rows(seq, work, "iper_interleaved", steps, body, ctx)
 
 
 def _figure(work: Path, results: dict, figure: Path) -> None:
