@@ -34,6 +34,7 @@ from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, pict
 from gma.train.metrics import psnr
 from gma.train.pose_refine import PoseCorrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
+from gma.train.symmetry import SymmetryPrior
 
 __all__ = ["CHECKPOINT_NAME", "Stage", "Trainer", "refined_body_path", "work_dir"]
 
@@ -152,6 +153,7 @@ class Trainer:
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
         self.pose_start = round(cfg.pose.start * self.stages[0].steps) if self.stages else 0
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
+        self.symmetry = [self._symmetry_prior(s.frames) for s in self.subjects]
         need_lpips = any(s.weights.lpips > 0 for s in self.stages)
         self.lpips = load_lpips(verbose=progress) if need_lpips else None
         self.history: list[dict] = []
@@ -182,6 +184,19 @@ class Trainer:
             param_groups += [{"params": rot, "lr": pc.lr_rotation, "base_lr": pc.lr_rotation},
                              {"params": shift, "lr": pc.lr_translation, "base_lr": pc.lr_translation}]
         return torch.optim.Adam(param_groups, eps=1e-15)
+
+    def _symmetry_prior(self, frames: FrameSet) -> SymmetryPrior | None:
+        """The left-right symmetry prior for a subject's frames, or None when it is off or cannot apply:
+        the ablation without per-face features, or a body mesh that is not mirror-symmetric (then with a
+        notice, as the prior is on by default)."""
+        if self.cfg.symmetry == 0 or self.model.direct:
+            return None
+        try:
+            return SymmetryPrior(frames, self.body)
+        except ValueError as e:
+            if self.progress:
+                print(f"[gma] symmetry prior skipped: {e}")
+            return None
 
     def _bones(self, subject: int, t: int, learn: bool) -> torch.Tensor | None:
         """Bone transforms [J, 4, 4] of training frame ``t`` from its corrected pose (differentiable in
@@ -240,6 +255,9 @@ class Trainer:
         if w.normal > 0:
             terms["normal"] = normal_consistency(out.normal, out.depth, out.alpha, frames.K[t])
         loss = sum(getattr(w, k) * v for k, v in terms.items())
+        if self.symmetry[subject] is not None:  # one weight for both stages: f_tex learns in both
+            terms["symmetry"] = self.symmetry[subject](model.f_tex)
+            loss = loss + cfg.symmetry * terms["symmetry"]
         if poses is not None and learn_poses:  # its weights are in cfg.pose, not the stage's
             terms["pose_reg"] = poses.regulariser(t, cfg.pose)
             loss = loss + terms["pose_reg"]

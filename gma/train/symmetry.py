@@ -1,0 +1,79 @@
+"""A left-right symmetry prior on the avatar's texture features (``gma fit --symmetry W``), for clips
+that show one side of the person less than the other: a single turn that stops short of the start, a
+person filmed mostly from one side.
+
+The body's rest mesh is mirror-symmetric about its x = 0 plane (Anny's exactly, at any phenotype), so
+every face has a mirror face. The prior pulls each face's texture features ``f_tex`` toward those of its
+mirror face, in proportion to how much less the training frames show it than its mirror
+(``coverage_weights``): a side the clip shows well learns from its pictures alone and is not blurred
+toward the other, and a clip that shows both sides alike gets almost no pull, so a person who is not
+symmetric (a logo on one side of a shirt) keeps the difference where the pictures show it.
+"""
+
+from __future__ import annotations
+
+import torch
+from scipy.spatial import cKDTree
+
+from gma.body.geometry import face_centers, face_normals
+from gma.body.skinning import linear_blend_skinning
+
+__all__ = ["SymmetryPrior", "coverage_weights", "face_coverage", "mirror_faces"]
+
+
+def mirror_faces(vertices: torch.Tensor, faces: torch.Tensor, tolerance: float = 1e-3) -> torch.Tensor:
+    """[F] index of each face's mirror image across the plane x = 0 of a rest mesh ``vertices`` [V, 3]:
+    the face whose centre is nearest the face's centre with x negated. Raises ValueError when the mesh is
+    not left-right symmetric (some mirrored centre more than ``tolerance`` metres from every face centre,
+    or two faces claiming one mirror)."""
+    centers = face_centers(vertices.detach().double(), faces).numpy()
+    mirrored = centers * [-1.0, 1.0, 1.0]
+    dist, index = cKDTree(centers).query(mirrored)
+    worst = float(dist.max())
+    if worst > tolerance:
+        raise ValueError(f"the body mesh is not left-right symmetric about x = 0 (a mirrored face centre lies "
+                         f"{worst * 1000:.1f} mm from the nearest face): the symmetry prior needs one that is")
+    index = torch.from_numpy(index).long()
+    if not torch.equal(index[index], torch.arange(len(index))):
+        raise ValueError("the body mesh's faces do not pair up with mirror images: the symmetry prior needs a "
+                         "left-right symmetric mesh")
+    return index
+
+
+@torch.no_grad()
+def face_coverage(frames, body) -> torch.Tensor:
+    """[F] how much of each face the training frames show: the mean over frames of the cosine between
+    the posed face's normal and the direction to the camera, 0 when it faces away. Occlusion is ignored
+    (an arm in front of the torso): this measures which side of the body the camera went round."""
+    total = torch.zeros(len(body.faces))
+    for t in range(len(frames)):
+        verts = linear_blend_skinning(frames.rest[t], body.skin_indices, body.skin_weights, frames.bones[t])
+        n = face_normals(verts, body.faces)
+        r, tr = frames.w2c[t, :3, :3], frames.w2c[t, :3, 3]
+        eye = -r.T @ tr
+        to_camera = torch.nn.functional.normalize(eye - face_centers(verts, body.faces), dim=-1)
+        total += (n * to_camera).sum(-1).clamp_min(0.0)
+    return total / max(len(frames), 1)
+
+
+def coverage_weights(coverage: torch.Tensor, mirror: torch.Tensor) -> torch.Tensor:
+    """[F] in [0, 1]: 1 - coverage / (the mirror face's coverage), 0 where a face is seen at least as much
+    as its mirror. A face the clip never shows whose mirror it does show gets 1; one seen half as much
+    gets 0.5."""
+    other = coverage[mirror]
+    return torch.where(other > coverage, 1.0 - coverage / other.clamp_min(1e-8), torch.zeros_like(coverage))
+
+
+class SymmetryPrior:
+    """``prior(f_tex)``: the mean over faces of weight × mean squared difference between a face's
+    texture features and its mirror face's, the mirror's held fixed (the better-seen side teaches the other, not
+    the reverse)."""
+
+    def __init__(self, frames, body):
+        self.mirror = mirror_faces(frames.rest[0], body.faces)
+        self.coverage = face_coverage(frames, body)
+        self.weights = coverage_weights(self.coverage, self.mirror)
+
+    def __call__(self, f_tex: torch.Tensor) -> torch.Tensor:
+        diff = f_tex - f_tex[self.mirror].detach()
+        return (self.weights * diff.pow(2).mean(-1)).mean()
