@@ -8,7 +8,8 @@ poses on the imported sequence's own frames and masks, splits the two.
 
 Then the real clip ``../shared/data/iper_turn_512.gif`` (last quarter held out): bounding-box PSNR of the
 held-out frames without refinement, with refinement in the fit, and with test-time pose fitting too, and
-a before/after picture (``--figure``, default docs/iper_pose_refinement.png). The clip is one turn, so
+a before/after picture (``--figure``, default docs/iper_pose_refinement.png), and the refined fit without
+the left-right symmetry prior beside it (docs/iper_symmetry.png). The clip is one turn, so
 its last quarter shows views no training frame shows; ``--interleaved`` also holds out every fourth
 frame instead (views between training views) and prints the same rows for that split.
 
@@ -49,14 +50,14 @@ def _import(clip: Path, out: Path, focal, anny) -> dict:
     return report
 
 
-def _fit(seq, out: Path, refine: str, body, ctx) -> tuple[object, float]:
+def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, float]:
     from gma.avatar import Avatar
     from gma.train.config import preset
     from gma.train.trainer import Trainer, work_dir
 
     if out.is_file() and (work_dir(out) / "metrics.json").is_file():
         return Avatar.load(out), json.loads((work_dir(out) / "metrics.json").read_text())["fit_seconds"]
-    cfg = preset("quick", pose={"refine": refine})
+    cfg = preset("quick", pose={"refine": refine}, **overrides)
     avatar = Trainer(cfg, seq, out, body=body, ctx=ctx, progress=False).run(resume=True)
     return avatar, avatar.info["fit_seconds"]
 
@@ -223,6 +224,12 @@ def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = Fa
     print(_header())
     results = _refinement_rows(seq, work, "iper", steps, body, ctx)
     _figure(work, results, figure)
+    # The left-right symmetry prior (on by default) fills in the side the turn shows less: the refined fit
+    # without it, and the held-out frames side by side.
+    avatar, fit_s = _fit(seq, work / "iper_on_nosym.gma", "on", body, ctx, symmetry=0.0)
+    nosym = _eval(avatar, seq, "test", work / "iper_on_nosym.eval", steps, body, ctx)
+    print(_row("fit with pose refinement on, --symmetry 0", nosym, fit_s))
+    _symmetry_figure(work, results["on"], figure.with_name("iper_symmetry.png"))
     if interleaved:
         seq = _interleaved_copy(seq_dir, work / "iper_interleaved", n)
         print(f"\niper_turn_512.gif, every fourth frame held out ({len(seq.split('test'))} frames, views between "
@@ -250,6 +257,23 @@ def _figure(work: Path, results: dict, figure: Path) -> None:
     save_png(figure, np.concatenate(rows, 0)[..., :3].astype(np.float32) / 255.0)
     print(f"  wrote {figure} (columns: held-out frame | avatar without refinement | refined fit + test-time "
           "pose fitting)")
+
+
+def _symmetry_figure(work: Path, results: dict, figure: Path) -> None:
+    """target | refined fit without the symmetry prior | with it (both after test-time pose fitting), for
+    the three held-out frames the clip shows least of the person's side (its first three)."""
+    import imageio.v3 as iio
+
+    from gma.render.image_io import save_png
+
+    rows = []
+    for f in [r["frame"] for r in results["frames"]][:3]:
+        a = iio.imread(work / "iper_on_nosym.eval" / f"test_refined_{f:06d}.png")
+        b = iio.imread(work / "iper_on.eval" / f"test_refined_{f:06d}.png")
+        w = a.shape[1] // 3
+        rows.append(np.concatenate([a[:, :w], a[:, w:2 * w], b[:, w:2 * w]], 1))
+    save_png(figure, np.concatenate(rows, 0)[..., :3].astype(np.float32) / 255.0)
+    print(f"  wrote {figure} (columns: held-out frame | refined, --symmetry 0 | refined, symmetry prior on)")
 
 
 def main(argv=None) -> int:
