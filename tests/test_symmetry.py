@@ -9,9 +9,9 @@ import json
 import pytest
 import torch
 
-from gma.body.geometry import face_centers, face_normals
+from gma.body.geometry import face_centers, face_normals, mirror_faces
 from gma.train.data import FrameSet
-from gma.train.symmetry import SymmetryPrior, coverage_weights, face_coverage, mirror_faces
+from gma.train.symmetry import SymmetryPrior, coverage_weights, face_coverage
 
 
 def _rest(anny_body) -> torch.Tensor:

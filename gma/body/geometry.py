@@ -20,6 +20,7 @@ __all__ = [
     "face_frames",
     "face_normals",
     "mesh_edges",
+    "mirror_faces",
     "morph_vertices",
     "safe_normalize",
     "uniform_laplacian",
@@ -174,3 +175,24 @@ def cotangent_laplacian(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Te
     cols = torch.cat([j, i, i, j])
     vals = torch.cat([-w, -w, w, w])
     return torch.sparse_coo_tensor(torch.stack([rows, cols]), vals, (v, v), check_invariants=False).coalesce()
+
+
+def mirror_faces(vertices: torch.Tensor, faces: torch.Tensor, tolerance: float = 1e-3) -> torch.Tensor:
+    """[F] index of each face's mirror image across the plane x = 0 of a rest mesh ``vertices`` [V, 3]:
+    the face whose centre is nearest the face's centre with x negated. Raises ValueError when the mesh is
+    not left-right symmetric (some mirrored centre more than ``tolerance`` metres from every face centre,
+    or two faces claiming one mirror)."""
+    from scipy.spatial import cKDTree
+
+    centers = face_centers(vertices.detach().double(), faces).numpy()
+    dist, index = cKDTree(centers).query(centers * [-1.0, 1.0, 1.0])
+    worst = float(dist.max())
+    if worst > tolerance:
+        raise ValueError(f"the body mesh is not left-right symmetric about x = 0 (a mirrored face centre lies "
+                         f"{worst * 1000:.1f} mm from the nearest face): mirrored edits and the symmetry prior "
+                         "need one that is")
+    index = torch.from_numpy(index).long()
+    if not torch.equal(index[index], torch.arange(len(index))):
+        raise ValueError("the body mesh's faces do not pair up with mirror images: mirrored edits and the "
+                         "symmetry prior need a symmetric mesh")
+    return index

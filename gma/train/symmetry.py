@@ -13,31 +13,11 @@ symmetric (a logo on one side of a shirt) keeps the difference where the picture
 from __future__ import annotations
 
 import torch
-from scipy.spatial import cKDTree
 
-from gma.body.geometry import face_centers, face_normals
+from gma.body.geometry import face_centers, face_normals, mirror_faces
 from gma.body.skinning import linear_blend_skinning
 
-__all__ = ["SymmetryPrior", "coverage_weights", "face_coverage", "mirror_faces"]
-
-
-def mirror_faces(vertices: torch.Tensor, faces: torch.Tensor, tolerance: float = 1e-3) -> torch.Tensor:
-    """[F] index of each face's mirror image across the plane x = 0 of a rest mesh ``vertices`` [V, 3]:
-    the face whose centre is nearest the face's centre with x negated. Raises ValueError when the mesh is
-    not left-right symmetric (some mirrored centre more than ``tolerance`` metres from every face centre,
-    or two faces claiming one mirror)."""
-    centers = face_centers(vertices.detach().double(), faces).numpy()
-    mirrored = centers * [-1.0, 1.0, 1.0]
-    dist, index = cKDTree(centers).query(mirrored)
-    worst = float(dist.max())
-    if worst > tolerance:
-        raise ValueError(f"the body mesh is not left-right symmetric about x = 0 (a mirrored face centre lies "
-                         f"{worst * 1000:.1f} mm from the nearest face): the symmetry prior needs one that is")
-    index = torch.from_numpy(index).long()
-    if not torch.equal(index[index], torch.arange(len(index))):
-        raise ValueError("the body mesh's faces do not pair up with mirror images: the symmetry prior needs a "
-                         "left-right symmetric mesh")
-    return index
+__all__ = ["SymmetryPrior", "coverage_weights", "face_coverage"]
 
 
 @torch.no_grad()
