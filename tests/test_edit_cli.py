@@ -47,6 +47,17 @@ def test_stamp_shape_and_body(files):
     assert np.allclose(av.shape.numpy(), [0.5, 0.5, 0.5, 0.5, 0.7, 0.5])
 
 
+def test_mirror_paints_both_hands(files, capsys):
+    from gma.avatar import Avatar
+
+    out = files / "mirrored.gma"
+    assert main(["edit", str(files / "in.gma"), "-o", str(out), "--select", "region:hand.L", "--mirror",
+                 "--paint", "#2040c0"]) == 0
+    record = Avatar.load(out).history[0]
+    assert record["op"] == "paint" and record["faces"] == 2 * 3196  # both hands (3196 faces each), nothing else
+    assert "painted 6392 faces" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("extra,message", [
     (["--select", "region:elbows", "--paint", "red"], "unknown body region 'elbows'"),
     (["--select", "box:front@0,0,2,2", "--paint", "red"], "empty"),
@@ -59,6 +70,7 @@ def test_stamp_shape_and_body(files):
     (["--select", "nothing.txt", "--paint", "red"], "cannot read selection"),
     (["--paint", "red"], "need --select"),
     (["--undo", "3"], "holds 0 records"),
+    (["--stamp", "shape:circle", "--mirror"], "--mirror applies to --paint and --transfer"),
     ([], "nothing to do"),
 ])
 def test_bad_input_one_line_exit_2(files, capsys, extra, message):

@@ -109,3 +109,21 @@ def test_regions_and_file(editor, tmp_path):
     assert back.faces.tolist() == [3, 5, 9] and back.face_weights().tolist() == [1.0, 0.5, 0.25]
     with pytest.raises(ValueError, match="body model"):
         Selection.load(tmp_path / "s.json", "smplx")
+
+
+def test_mirror_takes_the_other_side(editor, monkeypatch):
+    """The left hand's mirror image is exactly the right hand; a soft dab keeps its weights on both
+    sides; a body mesh that is not symmetric is refused in one line."""
+    body, mirror = editor.body, editor.mirror_map
+    left, right = Selection.from_regions(body, "hand.L"), Selection.from_regions(body, "hand.R")
+    assert torch.equal(left.mirrored(mirror).faces, right.faces)
+    both = left.symmetric(mirror)
+    assert torch.equal(both.mask(), left.mask() | right.mask())
+    view = editor.named_view("front", 128, 128)
+    dab = Selection.brush(view, view.px[left.faces.numpy()].mean(0), 10, falloff=0.5)
+    pair = dab.symmetric(mirror)
+    assert len(pair) == 2 * len(dab) and torch.allclose(pair.dense_weights()[mirror[dab.faces]], dab.face_weights())
+    shifted = editor.body.rest_vertices
+    monkeypatch.setattr(editor.body, "rest_vertices", lambda params: shifted(params) + torch.tensor([0.01, 0, 0]))
+    with pytest.raises(EditError, match="not left-right symmetric"):
+        Editor(editor.avatar, editor.body, None).mirror_map  # noqa: B018 - a fresh session: no cached map

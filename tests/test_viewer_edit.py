@@ -114,6 +114,34 @@ def test_selection_tools_only_hit_visible_faces(avatar_state):
 
 
 @pytest.mark.slow
+def test_mirror_toggle_selects_and_paints_both_sides(avatar_state):
+    from gma.edit.history import record_face_ids
+
+    s, ed = avatar_state, avatar_state.edit
+    before = len(s.source.avatar.history)
+    ed.mirror = True
+    try:
+        sel = ed.select_brush((70, 50), SIZE, "replace")
+        mirror = ed._mirror_map
+        dab = Selection.brush(ed.view(SIZE), (70, 50), ed.brush.radius, ed.brush.falloff)
+        assert len(sel) > len(dab) and torch.equal(sel.faces, dab.symmetric(mirror).faces)
+        assert bool(sel.mask()[mirror[sel.faces]].all())  # every face's mirror image is selected too
+        ed.brush.radius = 6
+        ed.stroke_begin(70, 40)
+        ed.stroke_to(80, 44)
+        ed.stroke_update(SIZE)
+        ed.stroke_end(SIZE)
+        ids = record_face_ids(s.source.avatar.history[-1])
+        assert len(s.source.avatar.history) == before + 1
+        assert set(ids.tolist()) == set(mirror[ids].tolist())  # the stroke landed on both sides
+    finally:
+        ed.mirror = False
+        while len(s.source.avatar.history) > before:
+            ed.undo()
+        ed.clear()
+
+
+@pytest.mark.slow
 def test_eyedropper_reads_the_rendered_colour(avatar_state):
     s, ed = avatar_state, avatar_state.edit
     img = render(s)

@@ -100,6 +100,7 @@ class EditTools:
         self.brush = BrushSettings()
         self.color = (0.75, 0.19, 0.19)
         self.wand_tolerance = 0.1
+        self.mirror = False  # selections and paint strokes also take their mirror image (left-right)
         self.stamp: StampState | None = None
         self.stamp_in_selection = False  # restrict the stamp to the selection
         self.donor = None  # the donor Avatar of a transfer
@@ -121,6 +122,7 @@ class EditTools:
         self._view_key = None
         self._ids = None
         self._editor: Editor | None = None
+        self._mirror_map: torch.Tensor | None = None
 
     # -- context --------------------------------------------------------------------------------------
     @property
@@ -171,8 +173,25 @@ class EditTools:
         return self._view
 
     # -- selection ------------------------------------------------------------------------------------
+    def _mirrored(self, sel: Selection) -> Selection:
+        """``sel`` united with its mirror image when the mirror toggle is on."""
+        if not self.mirror or len(sel) == 0:
+            return sel
+        if self._mirror_map is None:
+            from gma.body.geometry import mirror_faces
+
+            params = self.body.check_params(self.body.canonical_params(getattr(self.avatar, "shape", None)))
+            try:
+                self._mirror_map = mirror_faces(self.body.rest_vertices(params), self.body.faces)
+            except ValueError as exc:
+                self.mirror = False
+                raise InputError(str(exc)) from None
+        return sel.symmetric(self._mirror_map)
+
     def set_selection(self, sel: Selection, mode: str = "replace") -> Selection:
-        """Combine ``sel`` with the current selection (replace, add, subtract) and show it."""
+        """Combine ``sel`` (with its mirror image when the mirror toggle is on) with the current
+        selection (replace, add, subtract) and show it."""
+        sel = self._mirrored(sel)
         if mode == "add":
             sel = self.selection.union(sel)
         elif mode == "subtract":
@@ -476,7 +495,7 @@ class EditTools:
                 disc = Selection.brush(view, p, self.brush.radius, self.brush.falloff)
                 sel = disc if sel is None else sel.union(disc)
             self.stroke.dabs += len(pts)
-        if self._stroke_mode != "paint":
+        if self._stroke_mode != "paint":  # (set_selection adds the mirror image)
             if sel is not None:
                 self.set_selection(sel, "add" if self._stroke_mode == "select" else "subtract")
             if self._ending:
@@ -484,6 +503,7 @@ class EditTools:
             return sel is not None
         changed = sel is not None and len(sel) > 0
         if changed:
+            sel = self._mirrored(sel)
             if self.background:  # shown now; solved when the worker is free
                 self._preview(sel, self._stroke_color)
             todo = self._stroke_todo

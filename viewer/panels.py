@@ -224,6 +224,7 @@ class Panels:
         _, ed.brush.radius = imgui.slider_float("brush radius (px)", ed.brush.radius, 2.0, 200.0)
         _, ed.brush.falloff = imgui.slider_float("brush falloff", ed.brush.falloff, 0.0, 1.0)
         _, ed.wand_tolerance = imgui.slider_float("wand tolerance", ed.wand_tolerance, 0.0, 0.5)
+        _, ed.mirror = imgui.checkbox("mirror left-right (X)", ed.mirror)
         if imgui.tree_node("regions"):
             body = ed.body
             for k, name in enumerate(list(body.regions) + list(body.face_label_names)):

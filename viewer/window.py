@@ -10,9 +10,9 @@ rotates, wheel scales); right or middle drag pans; wheel zooms. Files dropped on
 become the stamp, .gma files the transfer donor.
 Keys: Space play/pause, R reset view, N navigate, B box, L lasso, C brush select, M magic wand,
 P paint, I eyedropper, T stamp, F fill selection, Enter apply stamp, G / Shift+G grow / shrink,
-[ ] brush radius, Ctrl+I invert, Esc clear selection, Ctrl+Z undo, Ctrl+Shift+Z (or Ctrl+Y) redo,
-Ctrl+S save, W wireframe, F1 panels on/off, 1-9 camera presets, 0 orbit camera. Closing with unsaved
-edits asks first (panels), or needs a second close (no panels).
+[ ] brush radius, X mirror left-right on/off, Ctrl+I invert, Esc clear selection, Ctrl+Z undo,
+Ctrl+Shift+Z (or Ctrl+Y) redo, Ctrl+S save, W wireframe, F1 panels on/off, 1-9 camera presets, 0 orbit
+camera. Closing with unsaved edits asks first (panels), or needs a second close (no panels).
 """
 
 from __future__ import annotations
@@ -252,6 +252,9 @@ class ViewerWindow:
             report(s, ed.shrink if shift else ed.grow)
         elif key == glfw.KEY_W:
             s.scene.options.wireframe = not s.scene.options.wireframe
+        elif key == glfw.KEY_X and ed is not None:
+            ed.mirror = not ed.mirror
+            s.message = f"mirror left-right {'on' if ed.mirror else 'off'}"
         elif key == glfw.KEY_ESCAPE and ed is not None:
             report(s, ed.clear)
         elif key == glfw.KEY_F1 and self.ui is not None:

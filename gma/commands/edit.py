@@ -3,6 +3,7 @@
     gma edit in.gma -o out.gma --select region:torso --paint "#c03030"
     gma edit in.gma -o out.gma --select selection.json --stamp logo.png --view front --size 0.15m
     gma edit in.gma -o out.gma --select wand:front@320,240 --transfer donor.gma --what tex
+    gma edit in.gma -o out.gma --select brush:left@200,180,30 --mirror --paint red   # both sides
     gma edit in.gma -o out.gma --shape 0.5,0.5,0.5,0.5,0.7,0.5
     gma edit in.gma --history            # list records
     gma edit in.gma -o out.gma --undo 2  # drop the last two records, restoring exactly
@@ -30,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--deselect", action="append", default=[], metavar="SPEC", help="faces to leave out")
     p.add_argument("--grow", type=int, default=0, help="grow the selection by N rings of faces")
     p.add_argument("--shrink", type=int, default=0, help="shrink the selection by N rings of faces")
+    p.add_argument("--mirror", action="store_true",
+                   help="also edit the mirror image of the selection across the body's left-right plane "
+                        "(paint and transfer; a stamp is placed from one view)")
     p.add_argument("--wand-tolerance", type=float, default=0.1, help="magic wand colour distance (RGB, 0..1.7)")
     p.add_argument("--view-size", type=int, default=512, help="pixels of the named views (wand/box/brush/stamp)")
     op = p.add_mutually_exclusive_group()
@@ -119,6 +123,8 @@ def _selection(ed, args):
         sel = sel.grow(ed.graph, args.grow)
     if args.shrink:
         sel = sel.shrink(ed.graph, args.shrink)
+    if args.mirror:
+        sel = sel.symmetric(ed.mirror_map)
     if len(sel) == 0:
         raise EditError(f"the selection {' + '.join(args.select)} is empty: no faces selected")
     return sel
@@ -166,6 +172,9 @@ def run(args: argparse.Namespace) -> int:
         raise EditError(f"-o {args.out} is the input file; pass --overwrite to replace it")
     if args.out and Path(args.out).suffix.lower() != ".gma":
         raise EditError(f"-o {args.out}: the output must be a .gma file")
+    if args.mirror and (args.paint is None and args.transfer is None):
+        raise EditError("--mirror applies to --paint and --transfer (a stamp is placed from one view: stamp "
+                        "each side from its own view)")
     avatar = Avatar.load(src)
     if args.history:
         if not avatar.history:

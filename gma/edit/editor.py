@@ -66,6 +66,7 @@ class Editor:
         self.invert = invert or InvertConfig()
         self._redo: list[tuple[dict, dict[str, torch.Tensor], dict | None]] = []
         self._graph: FaceGraph | None = None
+        self._mirror: torch.Tensor | None = None
         self._ids = None
 
     # -- context --------------------------------------------------------------------------------------
@@ -82,6 +83,21 @@ class Editor:
         if self._graph is None:
             self._graph = FaceGraph(self.body.faces)
         return self._graph
+
+    @property
+    def mirror_map(self) -> torch.Tensor:
+        """[F] each face's mirror face across the body's left-right plane (the avatar's rest shape in the
+        canonical pose, without its mesh-layer offsets, which need not be symmetric). EditError when the
+        body mesh is not left-right symmetric."""
+        if self._mirror is None:
+            from gma.body.geometry import mirror_faces
+
+            rest = self.body.rest_vertices(self.body.check_params(self.body.canonical_params(self.avatar.shape)))
+            try:
+                self._mirror = mirror_faces(rest, self.body.faces)
+            except ValueError as exc:
+                raise EditError(str(exc)) from None
+        return self._mirror
 
     @property
     def can_redo(self) -> bool:

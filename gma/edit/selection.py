@@ -225,6 +225,19 @@ class Selection:
             out = graph.ring(out)
         return Selection.from_mask(~out, self.dense_weights())
 
+    def mirrored(self, mirror: torch.Tensor) -> Selection:
+        """The mirror image across the body's left-right plane: face ``mirror[f]`` for each selected face
+        ``f``, same weight (``mirror`` [F]: :func:`gma.body.geometry.mirror_faces`)."""
+        if len(mirror) != self.num_faces:
+            raise EditError(f"mirror map of {len(mirror)} faces for a selection of {self.num_faces}")
+        w = torch.zeros(self.num_faces)
+        w[mirror[self.faces]] = self.face_weights()
+        return Selection.from_mask(w > 0, w)
+
+    def symmetric(self, mirror: torch.Tensor) -> Selection:
+        """This selection united with its mirror image (weights by maximum)."""
+        return self.union(self.mirrored(mirror))
+
     # -- file -----------------------------------------------------------------------------------------
     def save(self, path, body_model: str) -> None:
         save_selection(path, self.faces.numpy(), body_model, self.num_faces,
