@@ -1,8 +1,8 @@
 """The editing part of ``gma demo``: what the method is for. A second synthetic person is fitted against
 the first avatar's frozen decoders (the paper's shared decoders: features only), then the first avatar
-gets the showcase edits of :mod:`gma.edit.showcase` — a painted sleeve, a logo on the chest and the second
-person's trousers — and an ``edited_turntable.mp4`` beside the original one. Every step resumes or is
-reused when the demo runs again."""
+gets the showcase edits of :mod:`gma.edit.showcase` — a painted sleeve, a logo on the chest, mirrored
+cuffs and the second person's trousers — and an ``edited_turntable.mp4`` beside the original one. Every
+step resumes or is reused when the demo runs again."""
 
 from __future__ import annotations
 

@@ -1,8 +1,8 @@
 """``gma demo``: the whole method on the built-in default, end to end — synthesise the default sequence
 (a clothed Anny person turning), fit an avatar (two stages), evaluate it on held-out novel poses and
 views, write a turntable video and a novel-pose animation video, then edit it as the method is meant to
-be used (a painted sleeve, a logo on the chest, a second person's trousers fitted against the same
-decoders; see gma/commands/_demo_edit.py) and write ``edited_turntable.mp4`` and a short summary.
+be used (a painted sleeve, a logo on the chest, mirrored cuffs, a second person's trousers fitted against
+the same decoders; see gma/commands/_demo_edit.py) and write ``edited_turntable.mp4`` and a short summary.
 
 ``--quick`` (default) finishes within about 15 minutes on a 2-core CPU with lavapipe; ``--full`` is the
 GPU setting. Re-running continues where a killed run stopped (the sequence is reused, the fit resumes)."""

@@ -1,6 +1,7 @@
 """The edits that show the method's point on any fitted avatar: a painted sleeve, a logo stamped on the
-chest, and a second person's trousers (texture and geometry) transferred across identities. ``gma demo``
-runs them after its fit, and ``benchmarks/edit_pictures.py`` draws their before/after pictures.
+chest, cuffs painted on one arm and mirrored to the other, and a second person's trousers (texture and
+geometry) transferred across identities. ``gma demo`` runs them after its fit, and
+``benchmarks/edit_pictures.py`` draws their before/after pictures.
 
 Each edit is an ordinary :class:`~gma.edit.Editor` operation: recorded in the avatar's history, undoable,
 re-decoding only the faces it touches.
@@ -23,6 +24,8 @@ __all__ = ["SHOWCASE", "ShowcaseEdit", "logo_image", "run_showcase"]
 
 SLEEVE_COLOR = "#c03030"
 LOGO_WIDTH_M = 0.18
+CUFF_COLOR = "#f0c020"
+CUFF_RINGS = 18  # rings of faces grown from the hand: the forearm next to the wrist
 
 
 @dataclass
@@ -68,6 +71,13 @@ def _stamp_logo(ed: Editor, views: dict[str, ScreenView], donor) -> Change:
                     name="logo")
 
 
+def _mirror_cuffs(ed: Editor, views: dict[str, ScreenView], donor) -> Change:
+    # A band of the left forearm above the hand, and its mirror image on the right arm.
+    hand = Selection.from_regions(ed.body, "hand.L")
+    band = hand.grow(ed.graph, CUFF_RINGS).subtract(hand).intersect(Selection.from_regions(ed.body, "arms"))
+    return ed.paint(band.symmetric(ed.mirror_map), CUFF_COLOR)
+
+
 def _transfer_trousers(ed: Editor, views: dict[str, ScreenView], donor) -> Change:
     return ed.transfer(donor, Selection.from_regions(ed.body, "legs"), "both", donor_name="donor")
 
@@ -76,6 +86,8 @@ SHOWCASE = (
     ShowcaseEdit("paint_sleeve", f"painted sleeve (paint, left arm, {SLEEVE_COLOR})", "front", _paint_sleeve),
     ShowcaseEdit("stamp_logo", f"logo stamped on the chest (stamp, {LOGO_WIDTH_M} m, front view)", "front",
                  _stamp_logo),
+    ShowcaseEdit("mirror_cuffs", f"cuffs painted on the left forearm and mirrored to the right (paint --mirror, "
+                 f"{CUFF_COLOR})", "front", _mirror_cuffs),
     ShowcaseEdit("transfer_trousers", "a second person's trousers, texture and geometry (transfer --what both)",
                  "front", _transfer_trousers, needs_donor=True),
 )
