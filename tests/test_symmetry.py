@@ -111,6 +111,19 @@ def test_fit_with_the_prior(tmp_path, gpu, anny_body, monkeypatch, capsys):
     def lopsided(frames, body):
         raise ValueError("the body mesh is not left-right symmetric about x = 0 (...)")
 
+    # A fit checkpointed before the prior existed (its config.json has no "symmetry") resumes as it began.
+    d = work_dir(tmp_path / "off.gma")
+    cfg = json.loads((d / "config.json").read_text())
+    del cfg["symmetry"]
+    (d / "config.json").write_text(json.dumps(cfg))
+    capsys.readouterr()
+    Trainer(preset("quick", **tiny), seq, tmp_path / "off.gma", body=anny_body, ctx=gpu, progress=True).run(resume=True)
+    assert "resuming it with {'symmetry': 0.0}" in capsys.readouterr().out
+    assert json.loads((d / "config.json").read_text())["symmetry"] == 0.0
+    with pytest.raises(ValueError, match="another config"):  # any other difference is still refused
+        Trainer(preset("quick", **{**tiny, "seed": 3}), seq, tmp_path / "off.gma", body=anny_body, ctx=gpu,
+                progress=False).run(resume=True)
+
     monkeypatch.setattr(trainer_module, "SymmetryPrior", lopsided)
     capsys.readouterr()
     assert all("symmetry" not in h for h in history("lopsided"))

@@ -14,6 +14,7 @@ Sequences with estimated poses (from ``gma import video``) also learn per-frame 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -103,6 +104,11 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
         seen[name] = seen.get(name, 0) + 1
         outs.append(out / (f"{name}.gma" if names.count(name) == 1 else f"{name}_{seen[name]}.gma"))
     return outs
+
+
+# Fit options added after fits were already being made, with the value that reproduces what a fit did
+# before (a checkpoint from then resumes with it rather than failing the same-config check).
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0}
 
 
 class Trainer:
@@ -288,6 +294,15 @@ class Trainer:
         opt = None
         if resume and ckpt.is_file():
             saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
+            older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and k not in saved}
+            if older and {**saved, **older} == {**cfg_json, **older}:
+                # A fit started before these options existed continues as it began (what they were then).
+                saved = {**saved, **older}
+                self.cfg = dataclasses.replace(self.cfg, **older)
+                self.symmetry = [self._symmetry_prior(sub.frames) for sub in self.subjects]
+                cfg_json = self.cfg.to_dict()
+                if self.progress:
+                    print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
             if saved and saved != cfg_json:
                 raise ValueError(f"{self.dir / 'config.json'}: the checkpoint was made with another config; "
                                  "resume with the same options, or fit without --resume to start over")
