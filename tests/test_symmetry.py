@@ -49,7 +49,12 @@ def test_coverage_weights_on_known_values():
     w = coverage_weights(coverage, mirror)
     # never seen, mirror seen: 1; seen more than (or as much as) the mirror: 0; neither seen: 0.
     assert torch.allclose(w, torch.tensor([1.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
-    assert torch.allclose(coverage_weights(torch.tensor([0.1, 0.4]), torch.tensor([1, 0])), torch.tensor([0.75, 0.0]))
+    pair = torch.tensor([1, 0])
+    # Seen a quarter as much: shortfall 0.75, past the dead zone 0.2 -> (0.75 - 0.2) / 0.8.
+    assert torch.allclose(coverage_weights(torch.tensor([0.1, 0.4]), pair), torch.tensor([0.6875, 0.0]))
+    assert torch.allclose(coverage_weights(torch.tensor([0.1, 0.4]), pair, dead_zone=0.0), torch.tensor([0.75, 0.0]))
+    # Seen 85 % as much as the mirror: inside the dead zone, left alone.
+    assert float(coverage_weights(torch.tensor([0.34, 0.4]), pair).max()) == 0.0
 
 
 def test_a_camera_on_one_side_pulls_the_other_side(anny_body):
