@@ -8,7 +8,7 @@
 Prints medians, the machine and its load, and where the time goes (paint solve + re-decode in
 gma.edit, row upload, frame). The avatar is a fresh one (``Avatar.create``), the size of a fitted one.
 
-    python benchmarks/viewer_edit.py --size 640x480 --fine-per-face 4 --repeats 5
+    python benchmarks/viewer_edit.py --size 640x480 --fine-per-face 4 --repeats 5 [--mirror]
 """
 
 from __future__ import annotations
@@ -43,6 +43,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--stroke-frames", type=int, default=30)
     ap.add_argument("--motion", default=None, help="play this motion while painting (e.g. walk)")
+    ap.add_argument("--mirror", action="store_true", help="paint the strokes with the mirror toggle on (X): "
+                                                          "each dab lands on both sides")
     args = ap.parse_args()
     xvfb = ensure_display()
     try:
@@ -160,6 +162,7 @@ def run(args, tmp: Path) -> None:
     # -- 2. brush stroke through the mouse callbacks, one frame per move --------------------------------
     ed.clear()
     ed.brush.radius = args.radius
+    ed.mirror = args.mirror
     win.tool = "paint"
     ys = view.px[cand][:, 1]
     y0, y1 = np.percentile(ys, 10), np.percentile(ys, 90)
@@ -191,7 +194,8 @@ def run(args, tmp: Path) -> None:
         print(f"   stroke {rep}: {n - 1} frames in {el:.2f} s = {rates[-1]:.1f} FPS with the brush shown; "
               f"{st.updates} solves ({st.dabs} dabs, {st.faces} faces); after release {tail * 1e3:.0f} ms "
               f"until solved and folded into one record ({len(src.avatar.history)} records)")
-    print(f"2. brush stroke (radius {args.radius:g} px) while dragging: median {med(rates):.1f} frames/s, "
+    mirrored = ", mirrored" if args.mirror else ""
+    print(f"2. brush stroke (radius {args.radius:g} px{mirrored}) while dragging: median {med(rates):.1f} frames/s, "
           f"each showing the dabs so far (goal >= 5 on lavapipe); solved updates {med(solves):.1f}/s; "
           f"release -> stroke solved {med(lands):.0f} ms")
     win.close()
