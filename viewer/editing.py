@@ -34,7 +34,7 @@ import numpy as np
 import torch
 
 from gma.core.errors import GmaError, InputError
-from gma.edit import EditError, Editor, ScreenView, Selection, StampPlacement, load_stamp_image, parse_color
+from gma.edit import EditError, Editor, ScreenView, Selection, StampPlacement, load_stamp_image, mirror_map, parse_color
 from gma.edit.editor import summarize
 from gma.edit.history import make_record, record_face_ids, record_old
 
@@ -178,14 +178,11 @@ class EditTools:
         if not self.mirror or len(sel) == 0:
             return sel
         if self._mirror_map is None:
-            from gma.body.geometry import mirror_faces
-
-            params = self.body.check_params(self.body.canonical_params(getattr(self.avatar, "shape", None)))
             try:
-                self._mirror_map = mirror_faces(self.body.rest_vertices(params), self.body.faces)
-            except ValueError as exc:
-                self.mirror = False
-                raise InputError(str(exc)) from None
+                self._mirror_map = mirror_map(self.body, getattr(self.avatar, "shape", None))
+            except EditError:
+                self.mirror = False  # the toggle goes back off; the message becomes the status line
+                raise
         return sel.symmetric(self._mirror_map)
 
     def set_selection(self, sel: Selection, mode: str = "replace") -> Selection:

@@ -17,12 +17,13 @@ from gma.edit.idrender import FaceIdRenderer, IdImage, face_id_reference
 from gma.edit.invert import InvertConfig, solve_features
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
-from gma.edit.selection import FaceGraph, Selection, load_selection, save_selection
+from gma.edit.selection import FaceGraph, Selection, load_selection, mirror_map, save_selection
 from gma.edit.stamp import StampPlacement, load_stamp_image, solid_shape
 from gma.edit.transfer import check_shared_decoders, transfer_features
 from gma.edit.views import NAMED_VIEWS, canonical_vertices, named_view, posed_vertices
 
 __all__ = ["NAMED_VIEWS", "Change", "EditError", "Editor", "FaceGraph", "FaceIdRenderer", "IdImage", "InvertConfig",
            "ScreenView", "Selection", "StampPlacement", "canonical_vertices", "check_shared_decoders",
-           "face_id_reference", "load_selection", "load_stamp_image", "named_view", "paint_features", "parse_color",
-           "posed_vertices", "save_selection", "solid_shape", "solve_features", "summarize", "transfer_features"]
+           "face_id_reference", "load_selection", "load_stamp_image", "mirror_map", "named_view", "paint_features",
+           "parse_color", "posed_vertices", "save_selection", "solid_shape", "solve_features", "summarize",
+           "transfer_features"]

@@ -24,7 +24,7 @@ from gma.edit.history import apply_values, make_record, record_face_ids, restore
 from gma.edit.invert import InvertConfig
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
-from gma.edit.selection import FaceGraph, Selection
+from gma.edit.selection import FaceGraph, Selection, mirror_map
 from gma.edit.stamp import StampPlacement, resolve_placement, stamp_targets
 from gma.edit.transfer import WHAT, check_shared_decoders, transfer_features
 from gma.edit.views import named_view, posed_vertices
@@ -86,17 +86,10 @@ class Editor:
 
     @property
     def mirror_map(self) -> torch.Tensor:
-        """[F] each face's mirror face across the body's left-right plane (the avatar's rest shape in the
-        canonical pose, without its mesh-layer offsets, which need not be symmetric). EditError when the
-        body mesh is not left-right symmetric."""
+        """[F] each face's mirror face across the body's left-right plane (:func:`mirror_map` of the
+        avatar's body shape); EditError when the body mesh is not left-right symmetric."""
         if self._mirror is None:
-            from gma.body.geometry import mirror_faces
-
-            rest = self.body.rest_vertices(self.body.check_params(self.body.canonical_params(self.avatar.shape)))
-            try:
-                self._mirror = mirror_faces(rest, self.body.faces)
-            except ValueError as exc:
-                raise EditError(str(exc)) from None
+            self._mirror = mirror_map(self.body, self.avatar.shape)
         return self._mirror
 
     @property

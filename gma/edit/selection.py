@@ -5,7 +5,7 @@ Built from screen space for one camera and pose (box, lasso, circular brush: onl
 face-ID render, see :class:`gma.edit.screen.ScreenView`), from body part / region names, from a file,
 or by a magic wand (flood fill over face adjacency while a per-face value stays within a tolerance of
 the seed face's); combined by union / subtract / intersect / invert and grown or shrunk by rings of
-neighbouring faces.
+neighbouring faces, or mirrored across the body's left-right plane (``mirror_map``).
 
 File format (``save``), written atomically::
 
@@ -25,7 +25,7 @@ import torch
 from gma.edit.errors import EditError
 from gma.edit.screen import ScreenView, points_in_polygon
 
-__all__ = ["FaceGraph", "Selection", "SelectionFile", "load_selection", "save_selection"]
+__all__ = ["FaceGraph", "Selection", "SelectionFile", "load_selection", "mirror_map", "save_selection"]
 
 FORMAT = "gma-selection"
 
@@ -48,6 +48,19 @@ class FaceGraph:
     def ring(self, mask: np.ndarray) -> np.ndarray:
         """[F] bool: ``mask`` plus every face sharing an edge with it."""
         return mask | (self.matrix @ mask.astype(np.float32) > 0)
+
+
+def mirror_map(body, shape: torch.Tensor | None = None) -> torch.Tensor:
+    """[F] each face's mirror face across the body's left-right plane, from the rest mesh of ``shape``
+    (default: the body's default) without any mesh-layer offsets, which need not be symmetric. EditError
+    when the body mesh is not left-right symmetric."""
+    from gma.body.geometry import mirror_faces
+
+    rest = body.rest_vertices(body.check_params(body.canonical_params(shape)))
+    try:
+        return mirror_faces(rest, body.faces)
+    except ValueError as exc:
+        raise EditError(str(exc)) from None
 
 
 @dataclass(frozen=True, eq=False)
