@@ -107,6 +107,9 @@ def test_fit_with_the_prior(tmp_path, gpu, anny_body, monkeypatch, capsys):
 
     on = history("on")  # on by default
     assert len(on) == 4 and all(h["symmetry"] >= 0 for h in on)
+    assert "[gma] symmetry prior: " in capsys.readouterr().out
+    stats = json.loads((work_dir(tmp_path / "on.gma") / "metrics.json").read_text())["symmetry_prior"]["on"]
+    assert 0 <= stats["faces_pulled"] <= 1 and 0 <= stats["mean_weight_pulled"] <= 1
     assert all("symmetry" not in h for h in history("off", symmetry=0.0))
     direct = {**tiny["avatar"], "representation": "direct"}  # no per-face features: nothing to pull
     assert all("symmetry" not in h for h in history("direct", avatar=direct))

@@ -63,6 +63,12 @@ class SymmetryPrior:
         self.coverage = face_coverage(frames, body)
         self.weights = coverage_weights(self.coverage, self.mirror)
 
+    def summary(self) -> dict:
+        """What the prior acts on: the share of faces it pulls at all, and their mean weight."""
+        pulled = self.weights > 0
+        return {"faces_pulled": round(float(pulled.float().mean()), 4),
+                "mean_weight_pulled": round(float(self.weights[pulled].mean()), 4) if bool(pulled.any()) else 0.0}
+
     def __call__(self, f_tex: torch.Tensor) -> torch.Tensor:
         diff = f_tex - f_tex[self.mirror].detach()
         return (self.weights * diff.pow(2).mean(-1)).mean()

@@ -198,11 +198,16 @@ class Trainer:
         if self.cfg.symmetry == 0 or self.model.direct:
             return None
         try:
-            return SymmetryPrior(frames, self.body)
+            prior = SymmetryPrior(frames, self.body)
         except ValueError as e:
             if self.progress:
                 print(f"[gma] symmetry prior skipped: {e}")
             return None
+        if self.progress:
+            st = prior.summary()
+            print(f"[gma] symmetry prior: {100 * st['faces_pulled']:.0f} % of the faces are seen less than 80 % as "
+                  f"much as their mirror and learn from it too (mean weight {st['mean_weight_pulled']:.2f})")
+        return prior
 
     def _bones(self, subject: int, t: int, learn: bool) -> torch.Tensor | None:
         """Bone transforms [J, 4, 4] of training frame ``t`` from its corrected pose (differentiable in
@@ -369,6 +374,8 @@ class Trainer:
                 sub.avatar.info["decoders_shared_with"] = shared
             if sub.poses is not None:
                 sub.avatar.info["pose_refinement"] = sub.poses.summary()
+            if self.symmetry[i] is not None:
+                sub.avatar.info["symmetry_prior"] = self.symmetry[i].summary()
             sub.avatar.save(sub.out)
             if sub.poses is not None:
                 save_refined_body(refined_body_path(sub.out), sub.seq, sub.frames.indices, sub.poses.all_poses())
@@ -386,5 +393,9 @@ class Trainer:
         if self.pose_sets:
             metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
                                           for s in self.subjects if s.poses is not None}
+        priors = {sub.name: prior.summary() for sub, prior in zip(self.subjects, self.symmetry, strict=True)
+                  if prior is not None}
+        if priors:
+            metrics["symmetry_prior"] = priors
         atomic_write_json(self.dir / "metrics.json", metrics)
         return self.avatar
