@@ -1,4 +1,5 @@
-"""Scripted screen recording of the viewer's edit tools: a paint stroke, a stamp and a transfer, driven
+"""Scripted screen recording of the viewer's edit tools: a paint stroke, a mirrored stroke (X), a stamp and
+a transfer, driven
 through the window's own mouse and keyboard callbacks (the code paths a person's input takes), captured
 from the window's surface and written as a GIF.
 
@@ -139,6 +140,19 @@ def record(args, tmp: Path) -> None:
             cursor(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
             shot()
     release()
+    settle()
+
+    # 1b. X: mirror on, a green stroke down one side of the shirt lands on both sides; X again: off
+    key(glfw.KEY_X)
+    ed.set_color("#3cb44b")
+    x = cx - 0.8 * half
+    cursor(x, top + 0.5 * (bottom - top))
+    press()
+    for t in np.linspace(0, 1, 7)[1:]:
+        cursor(x, top + (0.5 + 0.4 * t) * (bottom - top))
+        shot()
+    release()
+    key(glfw.KEY_X)
     settle()
 
     # 2. stamp: drop an image on the window, drag it to the chest's lower half, turn it, Enter
