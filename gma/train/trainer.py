@@ -35,7 +35,7 @@ from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, pict
 from gma.train.metrics import psnr
 from gma.train.pose_refine import PoseCorrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
-from gma.train.symmetry import SymmetryPrior
+from gma.train.symmetry import DEAD_ZONE, SymmetryPrior
 
 __all__ = ["CHECKPOINT_NAME", "Stage", "Trainer", "refined_body_path", "work_dir"]
 
@@ -205,8 +205,9 @@ class Trainer:
             return None
         if self.progress:
             st = prior.summary()
-            print(f"[gma] symmetry prior: {100 * st['faces_pulled']:.0f} % of the faces are seen less than 80 % as "
-                  f"much as their mirror and learn from it too (mean weight {st['mean_weight_pulled']:.2f})")
+            print(f"[gma] symmetry prior: {100 * st['faces_pulled']:.0f} % of the faces are seen less than "
+                  f"{100 * (1 - DEAD_ZONE):.0f} % as much as their mirror and learn from it too (mean weight "
+                  f"{st['mean_weight_pulled']:.2f})")
         return prior
 
     def _bones(self, subject: int, t: int, learn: bool) -> torch.Tensor | None:
