@@ -35,6 +35,7 @@ SMOKE: dict[str, list[str] | str] = {
     "edit_pictures.py": ["--out", "{tmp}", "--size", "64"],
     "batch_scaling.py": ["--people", "1", "--size", "32", "--steps", "1", "1", "--out", "{tmp}/out"],
     "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",
+    "video_masks.py": ["--work", "{tmp}/work"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
 }
 

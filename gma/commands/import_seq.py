@@ -128,7 +128,7 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     camera = _camera_intrinsics(args)
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
     cfg = VideoImportConfig(focal=args.focal, camera=camera, start=args.start, end=args.end, skip=args.skip,
-                            fit=fit)
+                            check_masks=not args.no_mask_check, fit=fit)
     seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body, **kw)
     err = report.get("reprojection_error_px_mean")
     print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
@@ -138,6 +138,12 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     if "phenotype_named" in report:
         print("body shape (Anny phenotype, 0-1, 0.5 = average): "
               + ", ".join(f"{k} {v:.2f}" for k, v in report["phenotype_named"].items()))
+    check = report.get("mask_check", {})
+    if check.get("applied"):
+        print(f"masks checked against the background seen in other frames: {100 * check['person_area_added']:.2f} % "
+              f"of the person's area added, {100 * check['person_area_removed']:.2f} % removed")
+    elif args.mask_dir is None and "reason" in check:
+        print(f"masks left as MediaPipe estimated them: {check['reason']}")
     print(f"report: {seq.root / 'video_report.json'}; overlays: {seq.root / 'video_contact_sheet.png'}")
     return 0
 
@@ -245,6 +251,9 @@ def register(subparsers) -> None:
     masks.add_argument("--mask-video", default=None, help="a video of masks, one per frame")
     masks.add_argument("--mask-dir", default=None, help="a folder of mask images, one per frame")
     vd.add_argument("--model-dir", default=None, help="SMPL/SMPL-X model folder when body.npz uses them")
+    vd.add_argument("--no-mask-check", action="store_true", help="keep MediaPipe's masks as they are (by default "
+                    "they are checked against the background seen in other frames, for a fixed camera: holes in "
+                    "clothing filled, halos over the background removed; a moving camera is detected and skipped)")
 
     mo = fmt.add_parser(
         "motion", help="a motion for Anny from a BVH, an AMASS / SMPL-X .npz, or a video (gma[video])",

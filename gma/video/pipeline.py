@@ -35,6 +35,7 @@ from gma.video.camera import CameraIntrinsics, Undistortion, intrinsics, static_
 from gma.video.detect import detect_frames
 from gma.video.fit import FitConfig, fit_body
 from gma.video.frames import read_video
+from gma.video.matte import refine_masks
 from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
 from gma.video.rig import AnnyRig
 from gma.video.swaps import apply_swaps, resolve_swaps
@@ -57,6 +58,7 @@ class VideoImportConfig:
     skip: int = 1  # keep every N-th frame
     max_frames: int = 3000  # refuse longer selections (memory: frames are held decoded)
     sheet_frames: int = 12  # overlays on the contact sheet
+    check_masks: bool = True  # MediaPipe's masks checked against the background plate (gma.video.matte)
     fit: FitConfig = field(default_factory=FitConfig)
 
 
@@ -175,8 +177,13 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
         if undistort is not None:  # the user's masks are of the distorted frames
             masks = np.stack([undistort(m) for m in masks])
+        mask_check = {"applied": False, "reason": "the user's masks"}
+    elif cfg.check_masks:
+        t0 = time.perf_counter()
+        masks, mask_check = refine_masks(frames, det.masks, progress=progress)
+        timings["masks"] = time.perf_counter() - t0
     else:
-        masks = det.masks
+        masks, mask_check = det.masks, {"applied": False, "reason": "--no-mask-check"}
 
     if body is not None:
         (pose, phenotype), fit_info = _user_body(body, idx, src), {}
@@ -191,6 +198,7 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
     t0 = time.perf_counter()
     report, sheet = _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_info, cfg, anny)
     timings["report"] = time.perf_counter() - t0
+    report["mask_check"] = mask_check
     report["seconds"] = {k: round(v, 3) for k, v in timings.items()}
     report["seconds_per_frame"] = {k: round(v / T, 4) for k, v in timings.items()}
 

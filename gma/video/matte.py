@@ -1,0 +1,167 @@
+"""Person masks checked against the background, for a clip filmed from a fixed camera.
+
+MediaPipe's person mask is a low-resolution probability map: its edges are soft and sometimes a few
+pixels off, and it has holes where clothing looks like background to it (a dark jacket panel, a sleeve
+across the torso). Both end up in the avatar, since the fit's targets are the frames composited over a
+grey background through these masks: the avatar learns translucent patches and a grey halo.
+
+With a fixed camera the background is known wherever the person is not, and a person turning in place
+uncovers in one frame most of what they hide in another. So
+
+1. the **background plate** is the per-pixel median of the frames in which that pixel lies well away from
+   MediaPipe's person (``margin``); a pixel's plate is **known** when enough frames saw it and they agree
+   (a moving camera, a flickering light or someone walking by makes them disagree);
+2. in each frame, near MediaPipe's person and where the plate is known, pixels that **clearly differ** from
+   the plate (6 sigma of its own noise, and not a shadow: darker with the plate's hue) become person, which
+   fills holes and restores cut-off edges; pixels MediaPipe gives less than one half that **match** the
+   plate (within 3 sigma) become background, which removes the halo. Everything else keeps MediaPipe's value
+   (a white shirt against a white wall, a shadow, a pixel the plate never saw);
+3. person pixels added away from MediaPipe's person are dropped (a door that moved); the inside of the
+   person (``opaque_depth`` from its edge) is made opaque, and small holes the plate cannot explain (pixels
+   it never saw as background) are filled: MediaPipe's half-transparent patches lie mostly where the person
+   always stands, where the plate knows nothing.
+
+The worst case is MediaPipe's mask. A clip whose background moves (hand-held) is detected from the
+plate's spread and left as it is, with the reason in the report.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["MatteConfig", "background_plate", "refine_masks"]
+
+
+@dataclass
+class MatteConfig:
+    margin: float = 0.04          # of the image height: how far from MediaPipe's person a pixel counts as plate
+    min_views: float = 0.1        # share of the plate frames (at least 3) that must have seen a pixel
+    max_spread: float = 0.06      # largest median |frame - plate| (0-1 colour) of a known pixel
+    moving_spread: float = 0.05   # median spread over the image above which the camera counts as moving
+    noise_floor: float = 0.02     # smallest sigma of a plate pixel's colour (compression, dithering)
+    opaque_depth: float = 0.01    # of the image height: person pixels this far inside the mask are opaque
+    plate_frames: int = 48        # at most this many frames, evenly spaced, build the plate
+    chunk_rows: int = 32          # rows per block while building the plate (bounds memory)
+
+
+def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Boolean ``mask`` [..., H, W] grown by a square of half-width ``radius`` (separable: fast)."""
+    from scipy.ndimage import maximum_filter
+
+    size = (1,) * (mask.ndim - 2) + (2 * radius + 1, 2 * radius + 1)
+    return maximum_filter(mask.astype(np.uint8), size=size).astype(bool)
+
+
+def _erode(mask: np.ndarray, radius: int) -> np.ndarray:
+    """Pixels of boolean ``mask`` [H, W] whose whole square of half-width ``radius`` is in the mask."""
+    return ~_dilate(~mask, radius)
+
+
+def background_plate(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None = None):
+    """The clip's background: (plate float32 [H, W, 3] in 0-1, views int [H, W]: how many of the plate
+    frames saw the pixel as background, spread float32 [H, W]: their median absolute difference from the
+    plate, mean over the channels; inf where none did). ``frames`` uint8 [T, H, W, 3], ``masks`` [T, H, W]
+    person probabilities."""
+    cfg = cfg or MatteConfig()
+    T, H, W = masks.shape
+    sel = np.unique(np.linspace(0, T - 1, min(T, cfg.plate_frames)).round().astype(int))
+    person = _dilate(masks[sel] > 0.05, max(1, round(cfg.margin * H)))
+    views = (~person).sum(0)
+    plate = np.zeros((H, W, 3), np.float32)
+    spread = np.full((H, W), np.inf, np.float32)
+    for r0 in range(0, H, cfg.chunk_rows):
+        rows = slice(r0, min(H, r0 + cfg.chunk_rows))
+        seen = ~person[:, rows]
+        if not seen.any():
+            continue
+        samples = np.where(seen[..., None], frames[sel, rows].astype(np.float32) / 255.0, np.nan)
+        with warnings.catch_warnings():  # all-NaN columns: pixels no frame saw as background
+            warnings.simplefilter("ignore", RuntimeWarning)
+            block = np.nanmedian(samples, axis=0)
+            dev = np.nanmedian(np.abs(samples - block[None]), axis=0).mean(-1)
+        plate[rows] = np.nan_to_num(block)
+        spread[rows] = np.where(views[rows] > 0, dev, np.inf)
+    return plate, views, spread
+
+
+def _colour_test(frame: np.ndarray, plate: np.ndarray, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(clearly not the plate, the plate's colour) per pixel of ``frame`` uint8 [H, W, 3]."""
+    img = frame.astype(np.float32) / 255.0
+    diff = np.sqrt(((img - plate) ** 2).mean(-1))
+    lum_i, lum_p = img.mean(-1), np.maximum(plate.mean(-1), 1e-3)
+    ratio = lum_i / lum_p
+    chroma = np.abs(img / np.maximum(lum_i, 1e-3)[..., None] - plate / lum_p[..., None]).max(-1)
+    # A shadow (the person's, on the floor or a wall behind) darkens the plate and keeps its hue. A dark
+    # grey sleeve in front of a white wall keeps the hue too, but darkens far more (ratio well below 0.5).
+    shadow = (ratio > 0.5) & (ratio < 1.0) & (chroma < 0.12)
+    return (diff > 6.0 * sigma) & ~shadow, diff < 3.0 * sigma
+
+
+def _refine_frame(frame, mask, plate, known, sigma, radius, inner, cfg):
+    from scipy.ndimage import label
+
+    near = _dilate(mask > 0.05, radius) & known
+    differs, matches = _colour_test(frame, plate, sigma)
+    out = mask.copy()
+    out[near & differs] = 1.0
+    out[near & matches & (mask < 0.5)] = 0.0
+    # Person pixels added away from MediaPipe's person go back (a door that moved, a passer-by).
+    fg = out > 0.5
+    labels, n = label(fg)
+    if n:
+        touching = np.zeros(n + 1, bool)
+        touching[labels[(mask > 0.5) & fg]] = True
+        touching[0] = True
+        out = np.where(touching[labels], out, mask)
+    # The inside of a person is opaque: MediaPipe's soft patches there (a jacket panel it half-missed,
+    # mostly where the person always stands and the plate knows nothing) become person.
+    out[_erode(out > 0.5, inner)] = 1.0
+    return out
+
+
+def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None = None,
+                 progress: bool = False) -> tuple[np.ndarray, dict]:
+    """``masks`` float32 [T, H, W] checked against the clip's background plate (module docstring), and a
+    report: whether it was applied (else why not), the share of the person's surroundings whose background
+    is known, and the share of the person's area added and removed."""
+    from tqdm import tqdm
+
+    cfg = cfg or MatteConfig()
+    frames = np.asarray(frames)
+    masks = np.clip(np.asarray(masks, np.float32), 0.0, 1.0)
+    if masks.ndim != 3 or frames.shape != (*masks.shape, 3):
+        raise ValueError(f"frames {frames.shape} do not match masks {masks.shape}")
+    T, H, W = masks.shape
+    report: dict = {"applied": False}
+    if T < 3:
+        report["reason"] = f"{T} frames: too few to see the background behind the person"
+        return masks, report
+    plate, views, spread = background_plate(frames, masks, cfg)
+    seen = views >= 3
+    if not seen.any():
+        report["reason"] = "no pixel was background in three frames"
+        return masks, report
+    moving = float(np.median(spread[seen]))
+    report["background_spread_median"] = round(moving, 4)
+    if moving > cfg.moving_spread:
+        report["reason"] = (f"the background changes between frames (median spread {moving:.3f} > "
+                            f"{cfg.moving_spread}): the camera moves; masks left as estimated")
+        return masks, report
+    known = (views >= max(3, cfg.min_views * min(T, cfg.plate_frames))) & (spread <= cfg.max_spread)
+    sigma = np.maximum(cfg.noise_floor, 1.4826 * np.where(known, spread, 0.0)).astype(np.float32)
+    radius = max(1, round(cfg.margin * H))
+    inner = max(1, round(cfg.opaque_depth * H))
+    around = _dilate((masks > 0.05).any(0), radius)
+    out = np.empty_like(masks)
+    for t in tqdm(range(T), desc="masks", unit="frame", disable=not progress, leave=False):
+        out[t] = _refine_frame(frames[t], masks[t], plate, known, sigma, radius, inner, cfg)
+    before, after = masks > 0.5, out > 0.5
+    area = max(int(before.sum()), 1)
+    report.update(applied=True,
+                  known_background_near_person=round(float(known[around].mean()), 4),
+                  person_area_added=round(float((after & ~before).sum()) / area, 4),
+                  person_area_removed=round(float((before & ~after).sum()) / area, 4))
+    return out, report
