@@ -205,6 +205,13 @@ def test_pipeline_on_synthetic_clip(tmp_path, synth_clip, rig, anny_body):
     # Resumable: a second run reuses every detection and the fit.
     _, again = estimate_sequence(clip, out, config=cfg, progress=False, anny=anny_body, overwrite=True)
     assert again["frames_detect_reused"] == 10 and again["fit_resumed_from_cache"]
+    # --no-mask-check keeps MediaPipe's masks.
+    from gma.cli import main
+
+    assert main(["import", "video", str(clip), str(out), "--force", "--no-mask-check", "--focal",
+                 str(cfg.focal), "--fit-iters", "40", "150", "6"]) == 0
+    plain = json.loads((out / "video_report.json").read_text())
+    assert plain["mask_check"] == {"applied": False, "reason": "--no-mask-check"}
 
 
 def test_camera_file_undistorts_and_scales(tmp_path, synth_clip, anny_body):
