@@ -118,3 +118,5 @@ def test_too_few_frames_and_bad_shapes():
     np.testing.assert_array_equal(out, est[:2])
     with pytest.raises(ValueError, match="do not match"):
         refine_masks(frames[:, :64], est)
+    with pytest.raises(ValueError, match="probabilities"):
+        refine_masks(frames, np.where(est > 0.5, np.nan, est))

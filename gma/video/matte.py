@@ -131,9 +131,11 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
 
     cfg = cfg or MatteConfig()
     frames = np.asarray(frames)
-    masks = np.clip(np.asarray(masks, np.float32), 0.0, 1.0)
+    masks = np.asarray(masks, np.float32)  # (no copy of MediaPipe's: a long 1080p clip's masks take GBs)
     if masks.ndim != 3 or frames.shape != (*masks.shape, 3):
         raise ValueError(f"frames {frames.shape} do not match masks {masks.shape}")
+    if not (masks.min(initial=0.0) >= 0.0 and masks.max(initial=0.0) <= 1.0):  # NaN fails too
+        raise ValueError("masks must be probabilities in [0, 1]")
     T, H, W = masks.shape
     report: dict = {"applied": False}
     if T < 3:
@@ -155,7 +157,7 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
     radius = max(1, round(cfg.margin * H))
     inner = max(1, round(cfg.opaque_depth * H))
     around = _dilate((masks > 0.05).any(0), radius)
-    out = np.empty_like(masks)
+    out = np.empty_like(masks)  # the one copy
     for t in tqdm(range(T), desc="masks", unit="frame", disable=not progress, leave=False):
         out[t] = _refine_frame(frames[t], masks[t], plate, known, sigma, radius, inner, cfg)
     before, after = masks > 0.5, out > 0.5
