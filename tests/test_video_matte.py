@@ -34,12 +34,14 @@ def _person(t: int) -> np.ndarray:
     return (torso | head).astype(np.float32)
 
 
-def _clip(rng, shadow: bool = False, moving_camera: bool = False):
+def _clip(rng, shadow: bool = False, moving_camera: bool = False, exposure: bool = False):
     room = _room(rng)
     truth = np.stack([_person(t) for t in range(T)])
     frames, spoilt = [], []
     for t in range(T):
         bg = np.roll(room, 7 * t, axis=1) if moving_camera else room.copy()
+        if exposure and t % 4 == 3:  # auto exposure and white balance: a few frames brighter and warmer
+            bg = np.clip(bg * np.array([1.25, 1.18, 1.05], np.float32), 0, 1)
         if shadow:  # the figure's shadow on the floor, beside its feet: darker, same hue
             cx = 30 + 6 * t
             bg[96:104, cx + 10:cx + 30] *= 0.7
@@ -93,6 +95,14 @@ def test_a_shadow_on_the_floor_is_not_person():
     for t in range(T):
         cx = 30 + 6 * t
         assert out[t, 96:104, cx + 14:cx + 30].max() < 0.5, t
+
+
+def test_exposure_changes_are_followed():
+    frames, est, truth = _clip(np.random.default_rng(6), exposure=True)
+    out, report = refine_masks(frames, est)
+    assert report["applied"] and report["frames_left_as_estimated"] == 0
+    assert np.abs(out - truth).mean() < 0.25 * np.abs(est - truth).mean()
+    assert min(_iou(o, g) for o, g in zip(out, truth, strict=True)) > 0.97
 
 
 def test_a_moving_camera_leaves_the_masks_alone():

@@ -11,7 +11,9 @@ uncovers in one frame most of what they hide in another. So
 1. the **background plate** is the per-pixel median of the frames in which that pixel lies well away from
    MediaPipe's person (``margin``); a pixel's plate is **known** when enough frames saw it and they agree
    (a moving camera, a flickering light or someone walking by makes them disagree);
-2. in each frame, near MediaPipe's person and where the plate is known, pixels that **clearly differ** from
+2. in each frame (the plate first scaled per channel to the frame's exposure and white balance, from the
+   background away from the person; a frame whose background still differs is left alone), near
+   MediaPipe's person and where the plate is known, pixels that **clearly differ** from
    the plate (6 sigma of its own noise, and not a shadow: darker with the plate's hue) become person, which
    fills holes and restores cut-off edges; pixels MediaPipe gives less than one half that **match** the
    plate (within 3 sigma) become background, which removes the halo. Everything else keeps MediaPipe's value
@@ -100,10 +102,29 @@ def _colour_test(frame: np.ndarray, plate: np.ndarray, sigma: np.ndarray) -> tup
     return (diff > 6.0 * sigma) & ~shadow, diff < 3.0 * sigma
 
 
+def _frame_plate(frame: np.ndarray, plate: np.ndarray, far: np.ndarray, cfg: MatteConfig):
+    """The plate as this frame's exposure and white balance show it: scaled per channel by the median ratio
+    of the frame to the plate over ``far`` (known background away from the person). None when too little
+    background is visible or it still differs after that (lights changed, the camera moved once)."""
+    if far.sum() < 64:
+        return None
+    img = frame[far].astype(np.float32) / 255.0
+    ref = plate[far]
+    gain = np.clip(np.median(img / np.maximum(ref, 0.02), axis=0), 0.5, 2.0)
+    adjusted = np.clip(plate * gain, 0.0, 1.0)
+    if np.median(np.sqrt(((img - adjusted[far]) ** 2).mean(-1))) > cfg.moving_spread:
+        return None
+    return adjusted
+
+
 def _refine_frame(frame, mask, plate, known, sigma, radius, inner, cfg):
+    """One frame's mask checked against the plate, or None when the frame does not match the plate."""
     from scipy.ndimage import label
 
     near = _dilate(mask > 0.05, radius) & known
+    plate = _frame_plate(frame, plate, known & ~near, cfg)
+    if plate is None:
+        return None
     differs, matches = _colour_test(frame, plate, sigma)
     out = mask.copy()
     out[near & differs] = 1.0
@@ -158,12 +179,16 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
     inner = max(1, round(cfg.opaque_depth * H))
     around = _dilate((masks > 0.05).any(0), radius)
     out = np.empty_like(masks)  # the one copy
+    unmatched = 0
     for t in tqdm(range(T), desc="masks", unit="frame", disable=not progress, leave=False):
-        out[t] = _refine_frame(frames[t], masks[t], plate, known, sigma, radius, inner, cfg)
+        checked = _refine_frame(frames[t], masks[t], plate, known, sigma, radius, inner, cfg)
+        unmatched += checked is None
+        out[t] = masks[t] if checked is None else checked
     before, after = masks > 0.5, out > 0.5
     area = max(int(before.sum()), 1)
     report.update(applied=True,
                   known_background_near_person=round(float(known[around].mean()), 4),
                   person_area_added=round(float((after & ~before).sum()) / area, 4),
-                  person_area_removed=round(float((before & ~after).sum()) / area, 4))
+                  person_area_removed=round(float((before & ~after).sum()) / area, 4),
+                  frames_left_as_estimated=unmatched)
     return out, report
