@@ -18,10 +18,10 @@ uncovers in one frame most of what they hide in another. So
    fills holes and restores cut-off edges; pixels MediaPipe gives less than one half that **match** the
    plate (within 3 sigma) become background, which removes the halo. Everything else keeps MediaPipe's value
    (a white shirt against a white wall, a shadow, a pixel the plate never saw);
-3. person pixels added away from MediaPipe's person are dropped (a door that moved); the inside of the
-   person (``opaque_depth`` from its edge) is made opaque, and small holes the plate cannot explain (pixels
-   it never saw as background) are filled: MediaPipe's half-transparent patches lie mostly where the person
-   always stands, where the plate knows nothing.
+3. person pixels added away from MediaPipe's person are dropped (a door that moved), and the inside of
+   the person (``opaque_depth`` from its edge) is made opaque: MediaPipe's half-transparent patches lie
+   mostly where the person always stands, where the plate knows nothing. (Filling enclosed holes there
+   as well was tried: on the iPER clip it also closed the real gap between the legs.)
 
 The worst case is MediaPipe's mask. A clip whose background moves (hand-held) is detected from the
 plate's spread and left as it is, with the reason in the report.
