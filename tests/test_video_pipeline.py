@@ -273,6 +273,23 @@ def test_no_person_is_a_clear_error(tmp_path, empty_room_clip):
         estimate_sequence(clip, tmp_path / "seq", progress=False)
 
 
+def test_wrong_mask_folder_fails_before_detection(tmp_path, empty_room_clip):
+    """--mask-dir with the wrong number of masks is refused, naming the folder, before any frame is
+    detected (nothing is left in OUT.work)."""
+    pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
+    import imageio.v3 as iio
+
+    from gma.video import estimate_sequence
+
+    masks = tmp_path / "masks"
+    masks.mkdir()
+    for i in range(3):  # the clip has 4 frames
+        iio.imwrite(masks / f"{i:03d}.png", np.zeros((64, 64), np.uint8))
+    with pytest.raises(ValueError, match="3 mask images for 4 video frames"):
+        estimate_sequence(empty_room_clip, tmp_path / "seq", mask_dir=masks, progress=False)
+    assert not (tmp_path / "seq.work" / "detect").exists()
+
+
 IPER = __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "data" / "iper_turn_512.gif"
 
 

@@ -171,18 +171,18 @@ def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, tim
 def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite,
               progress, anny, timings):
     T, H, W = frames.shape[:3]
-    det, reused = detect_person(src, frames, work, progress, timings)
-    if mask_dir is not None:
+    if mask_dir is not None:  # read (and checked) before the minutes of detection
         total = n_src if n_src is not None else _count(src)
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
         if undistort is not None:  # the user's masks are of the distorted frames
             masks = np.stack([undistort(m) for m in masks])
         mask_check = {"applied": False, "reason": "the user's masks"}
-    elif cfg.check_masks:
+    det, reused = detect_person(src, frames, work, progress, timings)
+    if mask_dir is None and cfg.check_masks:
         t0 = time.perf_counter()
         masks, mask_check = refine_masks(frames, det.masks, progress=progress)
         timings["masks"] = time.perf_counter() - t0
-    else:
+    elif mask_dir is None:
         masks, mask_check = det.masks, {"applied": False, "reason": "--no-mask-check"}
 
     if body is not None:
