@@ -274,8 +274,8 @@ def test_no_person_is_a_clear_error(tmp_path, empty_room_clip):
 
 
 def test_wrong_mask_folder_fails_before_detection(tmp_path, empty_room_clip):
-    """--mask-dir with the wrong number of masks is refused, naming the folder, before any frame is
-    detected (nothing is left in OUT.work)."""
+    """--mask-dir with the wrong number of masks, or a --body file that is not there, is refused before any
+    frame is detected (nothing is left in OUT.work)."""
     pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
     import imageio.v3 as iio
 
@@ -287,6 +287,8 @@ def test_wrong_mask_folder_fails_before_detection(tmp_path, empty_room_clip):
         iio.imwrite(masks / f"{i:03d}.png", np.zeros((64, 64), np.uint8))
     with pytest.raises(ValueError, match="3 mask images for 4 video frames"):
         estimate_sequence(empty_room_clip, tmp_path / "seq", mask_dir=masks, progress=False)
+    with pytest.raises((OSError, ValueError), match="missing_body.npz"):  # the same for --body
+        estimate_sequence(empty_room_clip, tmp_path / "seq", body=tmp_path / "missing_body.npz", progress=False)
     assert not (tmp_path / "seq.work" / "detect").exists()
 
 

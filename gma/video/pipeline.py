@@ -171,7 +171,9 @@ def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, tim
 def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite,
               progress, anny, timings):
     T, H, W = frames.shape[:3]
-    if mask_dir is not None:  # read (and checked) before the minutes of detection
+    # The user's inputs are read (and checked) before the minutes of detection.
+    user_body = _user_body(body, idx, src) if body is not None else None
+    if mask_dir is not None:
         total = n_src if n_src is not None else _count(src)
         masks = _masks_from_dir(Path(mask_dir), idx, total, (H, W))
         if undistort is not None:  # the user's masks are of the distorted frames
@@ -185,8 +187,8 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
     elif mask_dir is None:
         masks, mask_check = det.masks, {"applied": False, "reason": "--no-mask-check"}
 
-    if body is not None:
-        (pose, phenotype), fit_info = _user_body(body, idx, src), {}
+    if user_body is not None:
+        (pose, phenotype), fit_info = user_body, {}
     else:
         pose, phenotype, fit_info = fit_detections(det, masks, K, cfg, work, anny, progress, timings)
     centre = np.median(pose[:, 0, :3, 3], axis=0)
