@@ -51,6 +51,7 @@ def test_motion_from_synthetic_video(tmp_path, gpu, anny_body):
                              fit=FitConfig(iters_root=40, iters_pose=150, iters_shape=6))
     motion, report = estimate_motion(clip, tmp_path / "m.npz", config=vcfg, progress=False, anny=anny_body)
     assert len(motion) == 10 and report["frames_detected"] == 10
+    assert report["mask_check"]["applied"]  # the shape fit saw the masks checked against the background
     assert motion.fps == pytest.approx(10.0)
     back = load_motion_file(tmp_path / "m.npz", anny_body)
     torch.testing.assert_close(back.pose, motion.pose)
@@ -72,3 +73,6 @@ def test_no_person_is_a_clear_error(tmp_path, empty_room_clip):
     with pytest.raises(ValueError, match="no person detected"):
         estimate_motion(clip, tmp_path / "m.npz", progress=False)
     assert not (tmp_path / "m.npz").exists() and not (tmp_path / "m.npz.work").exists()
+    # A bad feet mode is refused before the video is even read.
+    with pytest.raises(ValueError, match="feet must be"):
+        estimate_motion(tmp_path / "missing.mp4", tmp_path / "m.npz", feet="ground", progress=False)

@@ -28,6 +28,7 @@ from gma.body.retarget import rotation_between
 from gma.core.errors import InputError
 from gma.core.outputs import prepare_output_file
 from gma.video.frames import read_video
+from gma.video.matte import refine_masks
 from gma.video.pipeline import VideoImportConfig, detect_person, fit_detections, reusable_work, video_camera, work_dir
 from gma.video.report import reprojection_errors
 
@@ -71,6 +72,8 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     src, out = Path(src), Path(out)
     if out.suffix.lower() != ".npz":
         raise InputError(f"{out}: a motion is written as .npz")
+    if feet not in ("frame", "clip"):
+        raise InputError(f"feet must be 'frame' or 'clip', got {feet!r}")
     prepare_output_file(out, overwrite)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -80,11 +83,12 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     work = work_dir(out)
     with reusable_work(work):
         det, reused = detect_person(src, frames, work, progress, timings)
-        pose, phenotype, info = fit_detections(det, det.masks, K, cfg, work, anny, progress, timings)
+        # The body fit's silhouette term (body shape) sees the masks checked against the background.
+        masks, mask_check = (refine_masks(frames, det.masks) if cfg.check_masks
+                             else (det.masks, {"applied": False, "reason": "check_masks off"}))
+        pose, phenotype, info = fit_detections(det, masks, K, cfg, work, anny, progress, timings)
     body = anny if anny is not None else load_body("anny")
     shape = torch.from_numpy(np.asarray(phenotype, np.float32))
-    if feet not in ("frame", "clip"):
-        raise InputError(f"feet must be 'frame' or 'clip', got {feet!r}")
     posed = place_on_floor(body, torch.from_numpy(upright_motion(pose)).float(), shape, per_frame=feet == "frame")
     fps = video_fps(src) / cfg.skip
     motion = Motion(src.stem, posed, torch.zeros(len(posed), 52), shape, fps)
@@ -92,7 +96,7 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     err = reprojection_errors(info["uv"], info["target_uv"], info["conf"])
     report = {"video": str(src), "frames_used": len(frames), "frames_detected": int(det.found.sum()),
               "frames_interpolated": int((~det.found).sum()), "frames_detect_reused": int(reused),
-              "fps": fps, "fit_resumed_from_cache": bool(info["resumed_fit"]),
+              "fps": fps, "fit_resumed_from_cache": bool(info["resumed_fit"]), "mask_check": mask_check,
               "reprojection_error_px_mean": float(np.nanmean(err)) if np.isfinite(err).any() else None,
               "seconds": {k: round(v, 3) for k, v in timings.items()}}
     return motion, report
