@@ -28,8 +28,15 @@ from gma.body.retarget import rotation_between
 from gma.core.errors import InputError
 from gma.core.outputs import prepare_output_file
 from gma.video.frames import read_video
-from gma.video.matte import refine_masks
-from gma.video.pipeline import VideoImportConfig, detect_person, fit_detections, reusable_work, video_camera, work_dir
+from gma.video.pipeline import (
+    VideoImportConfig,
+    checked_masks,
+    detect_person,
+    fit_detections,
+    reusable_work,
+    video_camera,
+    work_dir,
+)
 from gma.video.report import reprojection_errors
 
 __all__ = ["CAMERA_TO_ANNY", "estimate_motion", "upright_motion", "video_fps"]
@@ -84,8 +91,7 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     with reusable_work(work):
         det, reused = detect_person(src, frames, work, progress, timings)
         # The body fit's silhouette term (body shape) sees the masks checked against the background.
-        masks, mask_check = (refine_masks(frames, det.masks) if cfg.check_masks
-                             else (det.masks, {"applied": False, "reason": "check_masks off"}))
+        masks, mask_check = checked_masks(frames, det.masks, cfg, progress, timings)
         pose, phenotype, info = fit_detections(det, masks, K, cfg, work, anny, progress, timings)
     body = anny if anny is not None else load_body("anny")
     shape = torch.from_numpy(np.asarray(phenotype, np.float32))

@@ -168,6 +168,18 @@ def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, tim
     return det, reused
 
 
+def checked_masks(frames: np.ndarray, masks: np.ndarray, cfg: VideoImportConfig, progress: bool,
+                  timings: dict) -> tuple[np.ndarray, dict]:
+    """MediaPipe's ``masks`` checked against the clip's background (:mod:`gma.video.matte`) when
+    ``cfg.check_masks``, and the report's ``mask_check`` entry; the time goes into ``timings["masks"]``."""
+    if not cfg.check_masks:
+        return masks, {"applied": False, "reason": "--no-mask-check"}
+    t0 = time.perf_counter()
+    checked, report = refine_masks(frames, masks, progress=progress)
+    timings["masks"] = time.perf_counter() - t0
+    return checked, report
+
+
 def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite,
               progress, anny, timings):
     T, H, W = frames.shape[:3]
@@ -180,12 +192,8 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
             masks = np.stack([undistort(m) for m in masks])
         mask_check = {"applied": False, "reason": "the user's masks"}
     det, reused = detect_person(src, frames, work, progress, timings)
-    if mask_dir is None and cfg.check_masks:
-        t0 = time.perf_counter()
-        masks, mask_check = refine_masks(frames, det.masks, progress=progress)
-        timings["masks"] = time.perf_counter() - t0
-    elif mask_dir is None:
-        masks, mask_check = det.masks, {"applied": False, "reason": "--no-mask-check"}
+    if mask_dir is None:
+        masks, mask_check = checked_masks(frames, det.masks, cfg, progress, timings)
 
     if user_body is not None:
         (pose, phenotype), fit_info = user_body, {}
