@@ -238,42 +238,41 @@ def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = Fa
         _refinement_rows(seq, work, "iper_interleaved", steps, body, ctx)
 
 
-def _figure(work: Path, results: dict, figure: Path) -> None:
-    """target | no refinement | refined fit + test-time pose fitting, for up to three held-out frames
-    (cut from the side-by-side images ``gma eval`` writes: target | render | error)."""
+def _side_by_side(figure: Path, frames: list[int], left: Path, right: Path, columns: str) -> None:
+    """Per frame a row: the held-out frame and the render of ``left`` | the render of ``right``, each cut
+    from the side-by-side image ``gma eval`` writes (target | render | error); ``left`` / ``right`` are
+    paths with ``{f:06d}`` for the frame."""
     import imageio.v3 as iio
 
     from gma.render.image_io import save_png
 
-    frames = [r["frame"] for r in results["off"]["frames"]]
-    pick = [frames[i] for i in np.linspace(0, len(frames) - 1, 3).round().astype(int)]
     rows = []
-    for f in pick:
-        a = iio.imread(work / "iper_off.eval" / f"test_{f:06d}.png")
-        b = iio.imread(work / "iper_on.eval" / f"test_refined_{f:06d}.png")
+    for f in frames:
+        a = iio.imread(str(left).format(f=f))
+        b = iio.imread(str(right).format(f=f))
         w = a.shape[1] // 3
         rows.append(np.concatenate([a[:, :w], a[:, w:2 * w], b[:, w:2 * w]], 1))
     figure.parent.mkdir(parents=True, exist_ok=True)
     save_png(figure, np.concatenate(rows, 0)[..., :3].astype(np.float32) / 255.0)
-    print(f"  wrote {figure} (columns: held-out frame | avatar without refinement | refined fit + test-time "
-          "pose fitting)")
+    print(f"  wrote {figure} (columns: {columns})")
+
+
+def _figure(work: Path, results: dict, figure: Path) -> None:
+    """target | no refinement | refined fit + test-time pose fitting, for up to three held-out frames."""
+    frames = [r["frame"] for r in results["off"]["frames"]]
+    pick = [frames[i] for i in np.linspace(0, len(frames) - 1, 3).round().astype(int)]
+    _side_by_side(figure, pick, work / "iper_off.eval" / "test_{f:06d}.png",
+                  work / "iper_on.eval" / "test_refined_{f:06d}.png",
+                  "held-out frame | avatar without refinement | refined fit + test-time pose fitting")
 
 
 def _symmetry_figure(work: Path, results: dict, figure: Path) -> None:
     """target | refined fit without the symmetry prior | with it (both after test-time pose fitting), for
     the three held-out frames the clip shows least of the person's side (its first three)."""
-    import imageio.v3 as iio
-
-    from gma.render.image_io import save_png
-
-    rows = []
-    for f in [r["frame"] for r in results["frames"]][:3]:
-        a = iio.imread(work / "iper_on_nosym.eval" / f"test_refined_{f:06d}.png")
-        b = iio.imread(work / "iper_on.eval" / f"test_refined_{f:06d}.png")
-        w = a.shape[1] // 3
-        rows.append(np.concatenate([a[:, :w], a[:, w:2 * w], b[:, w:2 * w]], 1))
-    save_png(figure, np.concatenate(rows, 0)[..., :3].astype(np.float32) / 255.0)
-    print(f"  wrote {figure} (columns: held-out frame | refined, --symmetry 0 | refined, symmetry prior on)")
+    _side_by_side(figure, [r["frame"] for r in results["frames"]][:3],
+                  work / "iper_on_nosym.eval" / "test_refined_{f:06d}.png",
+                  work / "iper_on.eval" / "test_refined_{f:06d}.png",
+                  "held-out frame | refined, --symmetry 0 | refined, symmetry prior on")
 
 
 def main(argv=None) -> int:
