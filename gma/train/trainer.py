@@ -159,7 +159,7 @@ class Trainer:
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
         self.pose_start = round(cfg.pose.start * self.stages[0].steps) if self.stages else 0
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
-        self.symmetry = [self._symmetry_prior(s.frames) for s in self.subjects]
+        self.symmetry: list[SymmetryPrior | None] = []  # per subject, built by run() once the config is final
         need_lpips = any(s.weights.lpips > 0 for s in self.stages)
         self.lpips = load_lpips(verbose=progress) if need_lpips else None
         self.history: list[dict] = []
@@ -305,7 +305,6 @@ class Trainer:
                 # A fit started before these options existed continues as it began (what they were then).
                 saved = {**saved, **older}
                 self.cfg = dataclasses.replace(self.cfg, **older)
-                self.symmetry = [self._symmetry_prior(sub.frames) for sub in self.subjects]
                 cfg_json = self.cfg.to_dict()
                 if self.progress:
                     print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
@@ -320,6 +319,7 @@ class Trainer:
         elif resume and self.progress:
             print(f"[gma fit] no checkpoint in {self.dir}; starting from step 0")
         atomic_write_json(self.dir / "config.json", cfg_json)
+        self.symmetry = [self._symmetry_prior(sub.frames) for sub in self.subjects]
 
         bar = tqdm(total=total, initial=step, desc="fit", unit="step", disable=not self.progress, dynamic_ncols=True)
         stage_idx = self._locate(step)[0] if step < total else len(self.stages) - 1
