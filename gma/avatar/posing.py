@@ -10,7 +10,7 @@ from gma.avatar.model import DecodedAvatar
 from gma.body.placement import place_surfels
 from gma.body.skinning import linear_blend_skinning
 
-__all__ = ["PosedSurfels", "backfacing_mask", "frame_params", "pose_surfels"]
+__all__ = ["PosedSurfels", "backfacing_mask", "face_away_cosine", "frame_params", "pose_surfels"]
 
 
 def frame_params(model: str, arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
@@ -64,11 +64,17 @@ def backfacing_mask(vertices: torch.Tensor, faces: torch.Tensor, face_id: torch.
     clearly away from it (cos > ``margin`` away). A back-facing face of a closed body is hidden behind
     front-facing ones, so dropping it changes only what shows through silhouettes; on a CPU rasteriser it
     halves the work of every training step."""
-    with torch.no_grad():
-        tri = vertices[faces]  # [F, 3, 3]
-        n = torch.nn.functional.normalize(torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), dim=-1)
-        r, t = viewmat[:3, :3], viewmat[:3, 3]
-        eye = -r.T @ t
-        to_face = torch.nn.functional.normalize(tri.mean(1) - eye, dim=-1)
-        keep_face = (n * to_face).sum(-1) < margin
-        return keep_face[face_id]
+    keep_face = face_away_cosine(vertices, faces, viewmat) < margin
+    return keep_face[face_id]
+
+
+@torch.no_grad()
+def face_away_cosine(vertices: torch.Tensor, faces: torch.Tensor, viewmat: torch.Tensor) -> torch.Tensor:
+    """[F] cosine between each face's normal and the direction from the camera (world->camera ``viewmat``)
+    to the face's centre: 1 for a face turned straight away from the camera, -1 for one facing it."""
+    tri = vertices[faces]  # [F, 3, 3]
+    n = torch.nn.functional.normalize(torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), dim=-1)
+    r, t = viewmat[:3, :3], viewmat[:3, 3]
+    eye = -r.T @ t
+    to_face = torch.nn.functional.normalize(tri.mean(1) - eye, dim=-1)
+    return (n * to_face).sum(-1)

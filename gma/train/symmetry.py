@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import torch
 
-from gma.body.geometry import face_centers, face_normals, mirror_faces
+from gma.avatar.posing import face_away_cosine
+from gma.body.geometry import mirror_faces
 from gma.body.skinning import linear_blend_skinning
 
 __all__ = ["DEAD_ZONE", "SymmetryPrior", "coverage_weights", "face_coverage"]
@@ -28,11 +29,7 @@ def face_coverage(frames, body) -> torch.Tensor:
     total = torch.zeros(len(body.faces))
     for t in range(len(frames)):
         verts = linear_blend_skinning(frames.rest[t], body.skin_indices, body.skin_weights, frames.bones[t])
-        n = face_normals(verts, body.faces)
-        r, tr = frames.w2c[t, :3, :3], frames.w2c[t, :3, 3]
-        eye = -r.T @ tr
-        to_camera = torch.nn.functional.normalize(eye - face_centers(verts, body.faces), dim=-1)
-        total += (n * to_camera).sum(-1).clamp_min(0.0)
+        total += (-face_away_cosine(verts, body.faces, frames.w2c[t])).clamp_min(0.0)
     return total / max(len(frames), 1)
 
 
