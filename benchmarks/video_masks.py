@@ -34,10 +34,12 @@ IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
 
 def _scores(masks: np.ndarray, truth: np.ndarray) -> dict:
     """IoU at one half and mean absolute error, over whole frames and inside the true person's box."""
+    from gma.video.report import mask_iou
+
     ious, mae, mae_box = [], [], []
     for m, g in zip(masks, truth, strict=True):
-        a, b = m > 0.5, g > 0.5
-        ious.append((a & b).sum() / max((a | b).sum(), 1))
+        b = g > 0.5
+        ious.append(mask_iou(m > 0.5, b))
         mae.append(np.abs(m - g).mean())
         ys, xs = np.nonzero(b)
         if ys.size:

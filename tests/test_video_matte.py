@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from gma.video.matte import MatteConfig, background_plate, refine_masks
+from gma.video.report import mask_iou
 
 H = W = 128
 T = 12
@@ -60,8 +61,7 @@ def _clip(rng, shadow: bool = False, moving_camera: bool = False, exposure: bool
 
 
 def _iou(a, b) -> float:
-    a, b = a > 0.5, b > 0.5
-    return float((a & b).sum() / (a | b).sum())
+    return mask_iou(a > 0.5, b > 0.5)
 
 
 def test_fixed_camera_masks_get_closer_to_the_truth():

@@ -58,11 +58,6 @@ def _gt_uv(rig, seq) -> np.ndarray:
     return np.stack(out)
 
 
-def _mask_iou(a, b) -> float:
-    a, b = a > 0.5, b > 0.5
-    return float((a & b).sum() / max((a | b).sum(), 1))
-
-
 def _joint_error(rig, uv, gt) -> float:
     idx = [rig.index(n) for n in BODY_JOINTS]
     return float(np.linalg.norm(uv[:, idx] - gt[:, idx], axis=-1).mean())
@@ -196,7 +191,9 @@ def test_pipeline_on_synthetic_clip(tmp_path, synth_clip, rig, anny_body):
     assert saved["frames_used"] == 10 and (out / "video_contact_sheet.png").is_file()
     # A fixed camera: MediaPipe's masks were checked against the background, and stay close to the truth.
     assert saved["mask_check"]["applied"], saved["mask_check"]
-    ious = [_mask_iou(seq.mask(t), seq_gt.mask(t)) for t in range(10)]
+    from gma.video.report import mask_iou
+
+    ious = [mask_iou(seq.mask(t) > 0.5, seq_gt.mask(t) > 0.5) for t in range(10)]
     assert min(ious) > 0.9, ious
     # the fitted body shape is reported by name, the same values as the sequence's phenotype
     named = saved["phenotype_named"]
