@@ -92,3 +92,6 @@ def test_intrinsics_convention_and_downscale(tmp_path):
     np.testing.assert_allclose(cams.K[0], [[700, 0, 480], [0, 695.25, 270], [0, 0, 1]])
     with pytest.raises(ValueError, match="1920x1080"):
         intr.check_frame(1280, 720)
+    # A phone's portrait clip is read upright (1080x1920): the message says the frames are turned.
+    with pytest.raises(ValueError, match="turned by a quarter.*upright frames"):
+        intr.check_frame(1080, 1920)

@@ -5,6 +5,7 @@ fit against ground-truth landmarks (no MediaPipe needed), and — when MediaPipe
 from __future__ import annotations
 
 import json
+import logging
 
 import numpy as np
 import pytest
@@ -83,6 +84,32 @@ def test_bad_videos_give_clear_errors(tmp_path, synth_clip):
         read_video(tmp_path / "missing.mp4")
     with pytest.raises(VideoError, match="--skip"):
         read_video(clip, max_frames=3)
+
+
+def test_portrait_phone_clip_is_read_upright_without_warnings(tmp_path, synth_clip, caplog):
+    """Phones store a portrait clip as landscape frames plus a display rotation; the frames come back
+    turned as a player shows them, and imageio-ffmpeg's size warning about it is not passed on."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    from gma.video import read_video
+
+    _, clip = synth_clip
+    stored = tmp_path / "stored.mp4"
+    rotated = tmp_path / "portrait.mp4"
+    ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
+    # A wide strip (192x96) of the clip, so that a turn changes the frame's shape.
+    subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-i", str(clip), "-vf", "crop=192:96:0:48", "-c:v", "libx264",
+                    "-pix_fmt", "yuv420p", str(stored)], check=True)
+    subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-display_rotation", "90", "-i", str(stored), "-c", "copy",
+                    str(rotated)], check=True)
+    plain, _ = read_video(stored)
+    with caplog.at_level(logging.WARNING):
+        upright, _ = read_video(rotated)
+    assert plain.shape == (10, 96, 192, 3) and upright.shape == (10, 192, 96, 3)
+    assert np.array_equal(upright, np.rot90(plain, 1, axes=(1, 2)))  # 90 degrees counter-clockwise, as stored
+    assert not [r for r in caplog.records if "frame size" in r.getMessage()]
 
 
 # -- left/right swaps -------------------------------------------------------------------------------

@@ -99,6 +99,12 @@ class CameraIntrinsics:
 
     def check_frame(self, width: int, height: int) -> None:
         """Refuse a calibration that does not fit a ``width``×``height`` video (one line naming the file)."""
+        if self.width is not None and (self.width, self.height) == (height, width) and width != height:
+            # A phone's portrait clip: landscape frames stored with a display rotation, which reading applies.
+            raise InputError(f"{self.source}: the calibration is for {self.width}x{self.height} frames and the video's "
+                             f"are {width}x{height}, turned by a quarter: a phone's portrait clip is read upright, "
+                             "so give the intrinsics of the upright frames (fx and fy swapped, cx and cy as seen in "
+                             "the turned picture)")
         if self.width is not None and (self.width, self.height) != (width, height):
             raise InputError(f"{self.source}: the calibration is for {self.width}x{self.height} frames, the video is "
                              f"{width}x{height} (give intrinsics in pixels of the original video)")

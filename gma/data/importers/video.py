@@ -11,6 +11,7 @@ estimates masks, camera and body from the video itself (``gma import video clip.
 
 from __future__ import annotations
 
+import logging
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -32,8 +33,22 @@ def count_frames(path: str | os.PathLike) -> int:
     return sum(1 for _ in read_frames(path, False))
 
 
+class _RotatedFrameNotice(logging.Filter):
+    """Drops imageio-ffmpeg's warning that the frames read differ in size from the stored ones. Phones
+    store a portrait video as landscape frames plus a display rotation; ffmpeg applies the rotation, so
+    the frames come out upright (the size ffmpeg reports for them is the one used) and the warning would
+    only make a user think something went wrong."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "is different from the source frame size" not in record.getMessage()
+
+
+logging.getLogger("imageio_ffmpeg").addFilter(_RotatedFrameNotice())
+
+
 def read_frames(path, alpha: bool) -> Iterator[np.ndarray]:
-    """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg."""
+    """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg, upright: a
+    video's display rotation (a phone's portrait clip) is applied."""
     channels = 4 if alpha else 3
     try:
         gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgba" if alpha else "rgb24", bpp=channels)
