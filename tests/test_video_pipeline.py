@@ -86,30 +86,61 @@ def test_bad_videos_give_clear_errors(tmp_path, synth_clip):
         read_video(clip, max_frames=3)
 
 
-def test_portrait_phone_clip_is_read_upright_without_warnings(tmp_path, synth_clip, caplog):
-    """Phones store a portrait clip as landscape frames plus a display rotation; the frames come back
-    turned as a player shows them, and imageio-ffmpeg's size warning about it is not passed on."""
+def _ffmpeg(*args) -> None:
     import subprocess
 
     import imageio_ffmpeg
 
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", *map(str, args)], check=True)
+
+
+def test_portrait_phone_clip_is_read_upright_without_warnings(tmp_path, synth_clip, caplog):
+    """Phones store a portrait clip as landscape frames plus a display rotation; the frames come back
+    turned as a player shows them, and imageio-ffmpeg's size warning about it is not passed on."""
     from gma.video import read_video
 
     _, clip = synth_clip
     stored = tmp_path / "stored.mp4"
     rotated = tmp_path / "portrait.mp4"
-    ffmpeg = imageio_ffmpeg.get_ffmpeg_exe()
     # A wide strip (192x96) of the clip, so that a turn changes the frame's shape.
-    subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-i", str(clip), "-vf", "crop=192:96:0:48", "-c:v", "libx264",
-                    "-pix_fmt", "yuv420p", str(stored)], check=True)
-    subprocess.run([ffmpeg, "-y", "-loglevel", "error", "-display_rotation", "90", "-i", str(stored), "-c", "copy",
-                    str(rotated)], check=True)
+    _ffmpeg("-i", clip, "-vf", "crop=192:96:0:48", "-c:v", "libx264", "-pix_fmt", "yuv420p", stored)
+    _ffmpeg("-display_rotation", "90", "-i", stored, "-c", "copy", rotated)
     plain, _ = read_video(stored)
     with caplog.at_level(logging.WARNING):
         upright, _ = read_video(rotated)
     assert plain.shape == (10, 96, 192, 3) and upright.shape == (10, 192, 96, 3)
     assert np.array_equal(upright, np.rot90(plain, 1, axes=(1, 2)))  # 90 degrees counter-clockwise, as stored
     assert not [r for r in caplog.records if "frame size" in r.getMessage()]
+
+
+@pytest.mark.parametrize("transfer, name", [("arib-std-b67", "HLG"), ("smpte2084", "PQ")])
+def test_hdr_phone_clip_is_tone_mapped(tmp_path, synth_clip, transfer, name, monkeypatch):
+    """Phones record HDR (iPhones HLG, many others PQ). The clip here is the SDR clip turned into 10-bit HDR
+    the way BT.2408 places SDR white (203 cd/m²): read back, its frames match the SDR clip's within
+    compression noise and the import is told what it was; decoded as if SDR they come out dim and grey."""
+    import imageio_ffmpeg
+
+    import gma.data.importers.video as video_io
+    from gma.video import read_video
+
+    _, clip = synth_clip
+    hdr = tmp_path / f"{name}.mp4"
+    _ffmpeg("-i", clip, "-vf", f"zscale=tin=bt709:min=bt709:pin=bt709:t={transfer}:m=bt2020nc:p=bt2020:npl=203,"
+            "format=yuv420p10le", "-c:v", "libx265", "-x265-params", "log-level=error", "-color_primaries", "bt2020",
+            "-color_trc", transfer, "-colorspace", "bt2020nc", hdr)
+    sdr, _ = read_video(clip)
+    info: dict = {}
+    mapped, _ = read_video(hdr, info=info)
+    assert info == {"hdr": name}
+    assert np.abs(mapped.astype(float) - sdr).mean() < 4.0  # measured 1.7 (HLG) and 2.2 (PQ): two lossy encodes
+    gen = imageio_ffmpeg.read_frames(str(hdr))
+    next(gen)
+    as_sdr = np.stack([np.frombuffer(f, np.uint8).reshape(sdr.shape[1:]) for f in gen])
+    assert np.abs(as_sdr.astype(float) - sdr).mean() > 10.0  # read without the tone mapping: 15.8 and 23.5
+    # An ffmpeg without the filters gets one line that says what is missing.
+    monkeypatch.setattr(video_io, "TO_SDR", "no_such_filter")
+    with pytest.raises(ValueError, match=f"{hdr.name}: an HDR \\({name}\\) video.*cannot tone-map"):
+        read_video(hdr)
 
 
 # -- left/right swaps -------------------------------------------------------------------------------

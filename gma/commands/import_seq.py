@@ -138,6 +138,8 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     if "phenotype_named" in report:
         print("body shape (Anny phenotype, 0-1, 0.5 = average): "
               + ", ".join(f"{k} {v:.2f}" for k, v in report["phenotype_named"].items()))
+    if report.get("hdr"):
+        print(f"HDR video ({report['hdr']}): frames tone-mapped to SDR (the HDR reference white becomes white)")
     check = report.get("mask_check", {})
     if check.get("applied"):
         print(f"masks checked against the background seen in other frames: {100 * check['person_area_added']:.2f} % "

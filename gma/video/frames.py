@@ -20,12 +20,13 @@ class VideoError(InputError):
 
 
 def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, skip: int = 1,
-               max_frames: int | None = None) -> tuple[np.ndarray, list[int]]:
+               max_frames: int | None = None, info: dict | None = None) -> tuple[np.ndarray, list[int]]:
     """Decode ``path`` and keep frames ``start:end:skip``.
 
     Returns (frames uint8 [T, H, W, 3], source frame indices [T]). Anything ffmpeg reads works
-    (mp4, mov, webm, gif, ...). ``max_frames`` guards memory: more selected frames is an error that
-    suggests ``--skip``/``--end``.
+    (mp4, mov, webm, gif, ...); frames come upright and in SDR (an HDR clip is tone-mapped, and
+    ``info["hdr"]`` names its transfer: see :func:`gma.data.importers.video.read_frames`). ``max_frames``
+    guards memory: more selected frames is an error that suggests ``--skip``/``--end``.
     """
     path = Path(path)
     if not path.is_file():
@@ -34,8 +35,10 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
         raise VideoError(f"{path}: the file is empty")
     frames = []
     try:
-        for img in read_frames(path, False):
+        for img in read_frames(path, False, info):
             frames.append(img.copy())
+    except InputError:
+        raise
     except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file
         raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
                          f"(ffmpeg: {_last_line(exc)})") from exc

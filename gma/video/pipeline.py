@@ -129,7 +129,8 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     prepare_sequence_output(out, overwrite)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
+    decoded: dict = {}
+    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames, decoded)
     n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
     timings["decode"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -138,7 +139,7 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     work = work_dir(out)
     with reusable_work(work):
         return _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale,
-                         overwrite, progress, anny, timings)
+                         overwrite, progress, anny, timings, decoded.get("hdr"))
 
 
 @contextlib.contextmanager
@@ -181,7 +182,7 @@ def checked_masks(frames: np.ndarray, masks: np.ndarray, cfg: VideoImportConfig,
 
 
 def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, body, downscale, overwrite,
-              progress, anny, timings):
+              progress, anny, timings, hdr):
     T, H, W = frames.shape[:3]
     # The user's inputs are read (and checked) before the minutes of detection.
     user_body = _user_body(body, idx, src) if body is not None else None
@@ -209,6 +210,7 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
     report, sheet = _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_info, cfg, anny)
     timings["report"] = time.perf_counter() - t0
     report["mask_check"] = mask_check
+    report["hdr"] = hdr  # "HLG" / "PQ": the frames were tone-mapped to SDR; None: an SDR video
     report["seconds"] = {k: round(v, 3) for k, v in timings.items()}
     report["seconds_per_frame"] = {k: round(v / T, 4) for k, v in timings.items()}
 

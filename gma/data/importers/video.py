@@ -21,6 +21,7 @@ import imageio_ffmpeg
 import numpy as np
 
 from gma.body.params import load_body, require_body_model
+from gma.core.errors import InputError
 from gma.data.cameras import load_cameras
 from gma.data.importers._common import frame_range, mask_from_array, write_imported
 from gma.data.sequence import IMAGE_SUFFIXES, Sequence
@@ -46,15 +47,50 @@ class _RotatedFrameNotice(logging.Filter):
 logging.getLogger("imageio_ffmpeg").addFilter(_RotatedFrameNotice())
 
 
-def read_frames(path, alpha: bool) -> Iterator[np.ndarray]:
-    """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg, upright: a
-    video's display rotation (a phone's portrait clip) is applied."""
+# HDR transfer functions as ffmpeg names them, and what to call them: phones record HDR by default
+# (iPhones HLG, many Android phones PQ / HDR10), and decoded as if SDR such a clip comes out dim and grey
+# (an HLG clip of a white room: mean level 117 for 185), which the avatar would learn.
+HDR_TRANSFERS = {"arib-std-b67": "HLG", "smpte2084": "PQ"}
+# HDR to SDR (BT.709) the simple way: BT.2408's HDR reference white (203 cd/m²) becomes SDR white and
+# brighter highlights clip, so everything up to white keeps its level (an SDR clip turned into HLG or PQ
+# this way reads back within 3-4 levels of the original; curves such as hable or mobius darken every
+# pixel to make room for highlights a person's clothes rarely have).
+TO_SDR = ("zscale=t=linear:npl=203,format=gbrpf32le,zscale=p=bt709,tonemap=tonemap=clip:desat=0,"
+          "zscale=t=bt709:m=bt709:r=tv,format=yuv420p")
+
+
+def hdr_transfer(meta: dict) -> str | None:
+    """``"HLG"`` or ``"PQ"`` when imageio-ffmpeg's ``meta`` describes an HDR video stream, else None."""
+    pix_fmt = str(meta.get("pix_fmt", ""))
+    return next((name for key, name in HDR_TRANSFERS.items() if key in pix_fmt), None)
+
+
+def read_frames(path, alpha: bool, info: dict | None = None) -> Iterator[np.ndarray]:
+    """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg, upright (a
+    video's display rotation, as in a phone's portrait clip, is applied) and in SDR: an HDR clip (HLG or
+    PQ) is tone-mapped (see ``TO_SDR``), and ``info["hdr"]`` says which it was."""
     channels = 4 if alpha else 3
-    try:
-        gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgba" if alpha else "rgb24", bpp=channels)
-        meta = next(gen)
-    except (OSError, RuntimeError, StopIteration) as exc:
-        raise ValueError(f"{path}: cannot open as a video ({exc})") from exc
+
+    def start(output_params):
+        try:
+            gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgba" if alpha else "rgb24", bpp=channels,
+                                             output_params=output_params)
+            return gen, next(gen)
+        except (OSError, RuntimeError, StopIteration) as exc:
+            raise ValueError(f"{path}: cannot open as a video ({exc})") from exc
+
+    gen, meta = start(None)
+    hdr = hdr_transfer(meta)
+    if hdr is not None and not alpha:
+        gen.close()
+        try:
+            gen, meta = start(["-vf", TO_SDR])
+        except ValueError as exc:
+            raise InputError(f"{path}: an HDR ({hdr}) video, and this ffmpeg cannot tone-map it to SDR (it needs the "
+                             "zscale and tonemap filters, which imageio-ffmpeg's own ffmpeg has: pip install -U "
+                             "imageio-ffmpeg)") from exc
+        if info is not None:
+            info["hdr"] = hdr
     w, h = meta["size"]
     try:
         for raw in gen:
