@@ -82,8 +82,43 @@ def test_bad_videos_give_clear_errors(tmp_path, synth_clip):
             read_video(path)
     with pytest.raises(FileNotFoundError, match="missing.mp4"):
         read_video(tmp_path / "missing.mp4")
-    with pytest.raises(VideoError, match="--skip"):
+    with pytest.raises(VideoError, match="10 frames selected, more than the limit 3"):
         read_video(clip, max_frames=3)
+
+
+def test_only_the_selected_frames_are_decoded_and_kept(synth_clip, monkeypatch):
+    """start / end / skip pick the frames ``frame_range`` names, and decoding stops at ``end`` (a clip
+    damaged after it still imports)."""
+    import gma.video.frames as video_frames
+    from gma.data.importers._common import frame_range
+    from gma.video import VideoError, read_video
+
+    _, clip = synth_clip
+    every, _ = read_video(clip)
+    for start, end, skip in ((0, None, 3), (2, 9, 2), (5, 6, 1), (9, None, 4)):
+        frames, idx = read_video(clip, start, end, skip)
+        assert idx == frame_range(10, start, end, skip)
+        assert np.array_equal(frames, every[idx])
+    with pytest.raises(ValueError, match="selects nothing of 10 frames"):
+        read_video(clip, start=20, skip=2)
+    with pytest.raises(ValueError, match="skip >= 1"):
+        read_video(clip, skip=0)
+
+    kept = []
+
+    def damaged_after_six(path, alpha, info=None):
+        for i, f in enumerate(every):
+            if i == 6:
+                raise RuntimeError("ffmpeg: invalid data found when processing input")
+            frame = f.copy()
+            kept.append(frame)
+            yield frame
+
+    monkeypatch.setattr(video_frames, "read_frames", damaged_after_six)
+    frames, idx = read_video(clip, 1, 5, 2)
+    assert idx == [1, 3] and len(kept) == 5  # stopped at end = 5
+    with pytest.raises(VideoError, match="damaged or truncated after 6 frames"):
+        read_video(clip, skip=2)
 
 
 def _ffmpeg(*args) -> None:
