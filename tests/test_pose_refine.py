@@ -17,7 +17,7 @@ import torch
 
 from gma.core.errors import InputError
 from gma.train.metrics import box_metrics, mask_iou, person_box, psnr
-from gma.train.pose_refine import PoseRefineConfig, apply_corrections, refine_wanted
+from gma.train.pose_refine import PoseRefineConfig, apply_corrections, blurred, coarse_sigma, refine_wanted
 
 # -- fast: formulas against references ----------------------------------------------------------------
 
@@ -187,6 +187,28 @@ def test_resume_with_refinement_matches_uninterrupted(repeated_seq, anny_body, g
     b = load_body(refined_body_path(tmp_path / "cut.gma")).arrays["pose"]
     assert not np.allclose(a, s.body.arrays["pose"], atol=1e-5)  # the poses did move
     np.testing.assert_allclose(a, b, atol=1e-4)
+
+
+def test_coarse_to_fine_blur():
+    """Test-time fitting's blur: 4 px at 192 px on the first step, shrinking linearly, sharp from 70 % of
+    the steps; the Gaussian keeps a flat image flat at its borders, spreads a point with the asked sigma,
+    and passes gradients."""
+    assert coarse_sigma(0, 60, 192) == pytest.approx(4.0)
+    assert coarse_sigma(21, 60, 192) == pytest.approx(2.0)
+    assert coarse_sigma(0, 60, 384) == pytest.approx(8.0)
+    assert all(coarse_sigma(i, 60, 192) == 0.0 for i in range(42, 60))
+    flat = torch.full((20, 30, 3), 0.25)
+    torch.testing.assert_close(blurred(flat, 2.5), flat)
+    point = torch.zeros(41, 41, 1, requires_grad=True)
+    with torch.no_grad():
+        point[20, 20] = 1.0
+    out = blurred(point, 3.0)
+    assert out.shape == point.shape and float(out.detach().sum()) == pytest.approx(1.0, abs=1e-5)
+    ys = torch.arange(41.0) - 20
+    var_y = float((out.detach()[..., 0].sum(1) * ys**2).sum())
+    assert var_y == pytest.approx(9.0, rel=0.02)  # a 3-sigma kernel truncates a little of the tails
+    out[10, 20, 0].backward()
+    assert point.grad is not None and float(point.grad.abs().sum()) > 0
 
 
 @pytest.mark.slow

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import roma
 import torch
+import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
@@ -149,13 +150,47 @@ def save_refined_body(path: Path, seq, indices: list[int], poses: torch.Tensor) 
 
 
 
+# Test-time fitting compares blurred pictures first: a Gaussian of COARSE_BLUR × the image's longer side
+# (4 px at 192 px) that shrinks linearly to nothing by COARSE_UNTIL of the steps. A limb a few pixels off
+# its place in the image gets no pull from a sharp loss once its edges no longer overlap; blurred, the
+# loss slopes toward it. iPER clip, last quarter, 60 steps, bbox PSNR: 25.29 -> 25.47 dB (100 steps:
+# 25.41 -> 25.62); sigma 2 or 3 px for the first half: 25.41, 5 px: 25.36, 6 px shrinking: 25.48.
+# Synthetic video benchmark, held-out poses: 25.76 -> 25.80.
+COARSE_BLUR = 4.0 / 192
+COARSE_UNTIL = 0.7
+
+
+def blurred(image: torch.Tensor, sigma: float) -> torch.Tensor:
+    """``image`` [H, W, C] through a separable Gaussian of ``sigma`` pixels, edges repeated (so a border
+    does not darken); differentiable."""
+    radius = max(1, int(3 * sigma))
+    x = torch.arange(-radius, radius + 1, dtype=image.dtype, device=image.device)
+    k = torch.exp(-0.5 * (x / sigma) ** 2)
+    k = k / k.sum()
+    c = image.shape[-1]
+    t = image.permute(2, 0, 1)[None]
+    t = F.conv2d(F.pad(t, (radius, radius, 0, 0), mode="replicate"), k.view(1, 1, 1, -1).expand(c, 1, 1, -1),
+                 groups=c)
+    t = F.conv2d(F.pad(t, (0, 0, radius, radius), mode="replicate"), k.view(1, 1, -1, 1).expand(c, 1, -1, 1),
+                 groups=c)
+    return t[0].permute(1, 2, 0)
+
+
+def coarse_sigma(step: int, steps: int, size: int) -> float:
+    """Blur (pixels) of test-time step ``step`` of ``steps`` at images of longer side ``size``; 0: sharp."""
+    sigma = COARSE_BLUR * size * (1 - step / (COARSE_UNTIL * steps))
+    return sigma if sigma > 0.3 else 0.0   # below a third of a pixel the kernel is a single tap
+
+
 def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, background: float = 0.5,
-                  ctx=None, progress: bool = False) -> PoseCorrections:
+                  ctx=None, progress: bool = False, coarse: bool = True) -> PoseCorrections:
     """Test-time pose fitting (the PeopleSnapshot protocol of Anim-NeRF / InstantAvatar): each frame's
     corrections optimised for ``steps`` Adam steps against its image and mask, with the avatar frozen
     (``decoded`` is used as it is; decode it under ``torch.no_grad``). Frames are independent (no
-    smoothness); the prior still pulls toward the input pose. Returns the corrections of ``frames``."""
+    smoothness); the prior still pulls toward the input pose. With ``coarse`` the first steps compare
+    blurred pictures (see ``COARSE_BLUR``). Returns the corrections of ``frames``."""
     corr = PoseCorrections(body, frames.poses, frames.indices)
+    size = max(frames.images.shape[1:3])
     bar = tqdm(total=len(frames) * steps, desc="refine poses", unit="step", disable=not progress, leave=False)
     for t in range(len(frames)):
         opt = torch.optim.Adam([{"params": [corr.rot[t]], "lr": cfg.lr_rotation},
@@ -167,9 +202,13 @@ def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, back
                 g["lr"] = lr * 0.1 ** (i / max(1, steps))
             bones = body.bone_transforms({"pose": corr.pose(t), "shape": frames.shape})
             out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=True, bones=bones)
-            l1, dssim = picture_loss(out.color, target)
+            color, want, alpha, mask = out.color, target, out.alpha, frames.masks[t]
+            sigma = coarse_sigma(i, steps, size) if coarse else 0.0
+            if sigma:
+                color, want, alpha, mask = (blurred(x, sigma) for x in (color, want, alpha, mask))
+            l1, dssim = picture_loss(color, want)
             r, d = corr.rot[t], corr.transl[t] / TRANSL_UNIT
-            loss = (0.8 * l1 + 0.2 * dssim + 0.1 * (out.alpha - frames.masks[t]).abs().mean()
+            loss = (0.8 * l1 + 0.2 * dssim + 0.1 * (alpha - mask).abs().mean()
                     + cfg.prior * (r.pow(2).sum(-1).mean() + d.pow(2).sum()))
             loss.backward()
             opt.step()
