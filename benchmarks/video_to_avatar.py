@@ -68,8 +68,10 @@ def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
     cached = out / f"metrics_{split}.json"
     if cached.is_file():
         res = json.loads(cached.read_text())
-        # (scores from before the avatar's own body identity was used lack "identity_delta": redo them)
-        if res.get("refined", {}).get("steps", 0) == steps and "identity_delta" in res:
+        # (scores from before the avatar's own body identity was used lack "identity_delta", those from
+        # before coarse-to-fine test-time fitting "coarse_to_fine": redo them)
+        refined = res.get("refined", {})
+        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine"):
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)

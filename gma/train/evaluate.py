@@ -36,9 +36,10 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
     ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim, psnr_bbox, ssim_bbox,
-    mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "frames", "mean", "poses"} when
-    ``refine_steps`` > 0: each frame's pose first optimised for that many steps at ``refine_resolution``
-    against its image with the avatar frozen (``refine``: learning rates and prior), then scored again.
+    mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "resolution", "coarse_to_fine", "frames",
+    "mean", "poses"} when ``refine_steps`` > 0: each frame's pose first optimised for that many steps at
+    ``refine_resolution`` against its image with the avatar frozen (``refine``: learning rates and prior;
+    coarse to fine, see :func:`gma.train.pose_refine.refine_frozen`), then scored again.
 
     The frames' poses are applied to the avatar's own body identity (``avatar.shape``), not the sequence's:
     the avatar's surfels sit on the body it was fitted on. The two are the same for the sequence an avatar
@@ -62,7 +63,7 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
         with torch.no_grad():
             bones = body.bone_transforms({"pose": poses, "shape": frames.shape})
         rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images)
-        result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]),
+        result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]), "coarse_to_fine": True,
                              "frames": rows_r, "mean": _mean(rows_r), "poses": corr.summary()}
     if out_dir is not None:
         out_dir = Path(out_dir)
