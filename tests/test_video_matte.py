@@ -105,6 +105,20 @@ def test_exposure_changes_are_followed():
     assert min(_iou(o, g) for o, g in zip(out, truth, strict=True)) > 0.97
 
 
+def test_black_bars_do_not_set_the_exposure():
+    """A pillarboxed clip (black bars beside the picture, more pixels than the visible background): the
+    bars' 0 / 0 ratios must not pull the exposure gain down, or every lit pixel near the person would
+    differ from the darkened plate and be taken for person."""
+    frames, est, truth = _clip(np.random.default_rng(7))
+    bars = ((0, 0), (0, 0), (96, 96))
+    frames = np.pad(frames, bars + ((0, 0),))
+    est, truth = np.pad(est, bars), np.pad(truth, bars)
+    out, report = refine_masks(frames, est)
+    assert report["applied"] and report["person_area_added"] < 0.2, report
+    assert np.abs(out - truth).mean() < 0.25 * np.abs(est - truth).mean()
+    assert min(_iou(o, g) for o, g in zip(out, truth, strict=True)) > 0.97
+
+
 def test_a_moving_camera_leaves_the_masks_alone():
     frames, est, _ = _clip(np.random.default_rng(3), moving_camera=True)
     out, report = refine_masks(frames, est)

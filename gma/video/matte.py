@@ -110,7 +110,16 @@ def _frame_plate(frame: np.ndarray, plate: np.ndarray, far: np.ndarray, cfg: Mat
         return None
     img = frame[far].astype(np.float32) / 255.0
     ref = plate[far]
-    gain = np.clip(np.median(img / np.maximum(ref, 0.02), axis=0), 0.5, 2.0)
+    # Ratios only where the plate is bright enough to have one: the black bars of a letterboxed or
+    # pillarboxed clip (0 / 0) would otherwise set the median, the gain would drop to its floor and the
+    # whole lit background near the person would read as person (a 1080p pillarboxed clip: 53 % of the
+    # person's area added, halos around the arms).
+    gain = np.ones(3, np.float32)
+    for c in range(3):
+        lit = ref[:, c] > 0.08
+        if lit.sum() >= 64:
+            gain[c] = np.median(img[lit, c] / ref[lit, c])
+    gain = np.clip(gain, 0.5, 2.0)
     adjusted = np.clip(plate * gain, 0.0, 1.0)
     if np.median(np.sqrt(((img - adjusted[far]) ** 2).mean(-1))) > cfg.moving_spread:
         return None
