@@ -104,6 +104,13 @@ def test_only_the_selected_frames_are_decoded_and_kept(synth_clip, monkeypatch):
     with pytest.raises(ValueError, match="skip >= 1"):
         read_video(clip, skip=0)
 
+    # Over the memory budget: refused as soon as the bytes run over, with a --skip that fits.
+    frame_bytes = every[0].nbytes
+    with pytest.raises(VideoError, match=r"10 frames of 192x192 selected .*use --skip 4 or --end to select at most 3"):
+        read_video(clip, max_bytes=3 * frame_bytes + 10)
+    frames, idx = read_video(clip, skip=4, max_bytes=3 * frame_bytes + 10)
+    assert idx == [0, 4, 8]
+
     kept = []
 
     def damaged_after_six(path, alpha, info=None):
@@ -166,7 +173,7 @@ def test_hdr_phone_clip_is_tone_mapped(tmp_path, synth_clip, transfer, name, mon
     sdr, _ = read_video(clip)
     info: dict = {}
     mapped, _ = read_video(hdr, info=info)
-    assert info == {"hdr": name}
+    assert info["hdr"] == name and info["frames_estimate"] == 10
     assert np.abs(mapped.astype(float) - sdr).mean() < 4.0  # measured 1.7 (HLG) and 2.2 (PQ): two lossy encodes
     gen = imageio_ffmpeg.read_frames(str(hdr))
     next(gen)

@@ -84,7 +84,7 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     prepare_output_file(out, overwrite)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames)
+    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames, max_bytes=cfg.max_decoded_bytes)
     timings["decode"] = time.perf_counter() - t0
     frames, K, _ = video_camera(frames, cfg)
     work = work_dir(out)

@@ -34,7 +34,7 @@ from gma.data.sequence import IMAGE_SUFFIXES, Sequence, prepare_sequence_output
 from gma.video.camera import CameraIntrinsics, Undistortion, intrinsics, static_camera
 from gma.video.detect import detect_frames
 from gma.video.fit import FitConfig, fit_body
-from gma.video.frames import read_video
+from gma.video.frames import memory_budget, read_video
 from gma.video.matte import refine_masks
 from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
 from gma.video.rig import AnnyRig
@@ -57,6 +57,7 @@ class VideoImportConfig:
     end: int | None = None  # stop before this frame
     skip: int = 1  # keep every N-th frame
     max_frames: int = 3000  # refuse longer selections (memory: frames are held decoded)
+    max_decoded_bytes: int | None = field(default_factory=memory_budget)  # of decoded frames (gma.video.frames)
     sheet_frames: int = 12  # overlays on the contact sheet
     check_masks: bool = True  # MediaPipe's masks checked against the background plate (gma.video.matte)
     fit: FitConfig = field(default_factory=FitConfig)
@@ -130,7 +131,7 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     decoded: dict = {}
-    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames, decoded)
+    frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames, decoded, cfg.max_decoded_bytes)
     n_src = idx[-1] + 1 if cfg.end is None and cfg.skip == 1 and cfg.start == 0 else None
     timings["decode"] = time.perf_counter() - t0
     t0 = time.perf_counter()

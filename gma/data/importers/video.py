@@ -68,7 +68,8 @@ def hdr_transfer(meta: dict) -> str | None:
 def read_frames(path, alpha: bool, info: dict | None = None) -> Iterator[np.ndarray]:
     """Decoded frames uint8 [H, W, 3] (or [H, W, 4] with ``alpha``), through imageio's ffmpeg, upright (a
     video's display rotation, as in a phone's portrait clip, is applied) and in SDR: an HDR clip (HLG or
-    PQ) is tone-mapped (see ``TO_SDR``), and ``info["hdr"]`` says which it was."""
+    PQ) is tone-mapped (see ``TO_SDR``), and ``info["hdr"]`` says which it was; ``info["frames_estimate"]``:
+    the frame count the header implies, when it gives a frame rate and a duration."""
     channels = 4 if alpha else 3
 
     def start(output_params):
@@ -91,6 +92,8 @@ def read_frames(path, alpha: bool, info: dict | None = None) -> Iterator[np.ndar
                              "imageio-ffmpeg)") from exc
         if info is not None:
             info["hdr"] = hdr
+    if info is not None and meta.get("fps") and meta.get("duration"):
+        info["frames_estimate"] = round(meta["fps"] * meta["duration"])  # from the header: may be off a little
     w, h = meta["size"]
     try:
         for raw in gen:
