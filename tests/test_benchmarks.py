@@ -36,6 +36,7 @@ SMOKE: dict[str, list[str] | str] = {
     "batch_scaling.py": ["--people", "1", "--size", "32", "--steps", "1", "1", "--out", "{tmp}/out"],
     "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",
     "video_masks.py": ["--work", "{tmp}/work"],
+    "video_hdr.py": ["--work", "{tmp}/work", "--figure", "{tmp}/hdr.png"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
 }
 

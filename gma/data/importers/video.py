@@ -49,7 +49,8 @@ logging.getLogger("imageio_ffmpeg").addFilter(_RotatedFrameNotice())
 
 # HDR transfer functions as ffmpeg names them, and what to call them: phones record HDR by default
 # (iPhones HLG, many Android phones PQ / HDR10), and decoded as if SDR such a clip comes out dim and grey
-# (an HLG clip of a white room: mean level 117 for 185), which the avatar would learn.
+# (the iPER clip as HLG: 43.5 levels off on average, PQ 70.2; benchmarks/video_hdr.py), which the avatar
+# would learn.
 HDR_TRANSFERS = {"arib-std-b67": "HLG", "smpte2084": "PQ"}
 # HDR to SDR (BT.709) the simple way: BT.2408's HDR reference white (203 cd/m²) becomes SDR white and
 # brighter highlights clip, so everything up to white keeps its level (an SDR clip turned into HLG or PQ
