@@ -183,12 +183,12 @@ def coarse_sigma(step: int, steps: int, size: int) -> float:
 
 
 def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, background: float = 0.5,
-                  ctx=None, progress: bool = False, coarse: bool = True) -> PoseCorrections:
+                  ctx=None, progress: bool = False) -> PoseCorrections:
     """Test-time pose fitting (the PeopleSnapshot protocol of Anim-NeRF / InstantAvatar): each frame's
     corrections optimised for ``steps`` Adam steps against its image and mask, with the avatar frozen
     (``decoded`` is used as it is; decode it under ``torch.no_grad``). Frames are independent (no
-    smoothness); the prior still pulls toward the input pose. With ``coarse`` the first steps compare
-    blurred pictures (see ``COARSE_BLUR``). Returns the corrections of ``frames``."""
+    smoothness); the prior still pulls toward the input pose. The first steps compare blurred pictures
+    (see ``COARSE_BLUR``). Returns the corrections of ``frames``."""
     corr = PoseCorrections(body, frames.poses, frames.indices)
     size = max(frames.images.shape[1:3])
     bar = tqdm(total=len(frames) * steps, desc="refine poses", unit="step", disable=not progress, leave=False)
@@ -203,7 +203,7 @@ def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, back
             bones = body.bone_transforms({"pose": corr.pose(t), "shape": frames.shape})
             out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=True, bones=bones)
             color, want, alpha, mask = out.color, target, out.alpha, frames.masks[t]
-            sigma = coarse_sigma(i, steps, size) if coarse else 0.0
+            sigma = coarse_sigma(i, steps, size)
             if sigma:
                 color, want, alpha, mask = (blurred(x, sigma) for x in (color, want, alpha, mask))
             l1, dssim = picture_loss(color, want)
