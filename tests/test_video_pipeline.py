@@ -96,9 +96,12 @@ def test_only_the_selected_frames_are_decoded_and_kept(synth_clip, monkeypatch):
     _, clip = synth_clip
     every, _ = read_video(clip)
     for start, end, skip in ((0, None, 3), (2, 9, 2), (5, 6, 1), (9, None, 4)):
-        frames, idx = read_video(clip, start, end, skip)
+        info: dict = {}
+        frames, idx = read_video(clip, start, end, skip, info=info)
         assert idx == frame_range(10, start, end, skip)
         assert np.array_equal(frames, every[idx])
+        # The clip's frame count is known when decoding ran to its end, not when it stopped at `end`.
+        assert info.get("frames_total") == (10 if end is None else None)
     with pytest.raises(ValueError, match="selects nothing of 10 frames"):
         read_video(clip, start=20, skip=2)
     with pytest.raises(ValueError, match="skip >= 1"):

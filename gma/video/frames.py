@@ -40,7 +40,8 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
 
     Returns (frames uint8 [T, H, W, 3], source frame indices [T]). Anything ffmpeg reads works
     (mp4, mov, webm, gif, ...); frames come upright and in SDR (an HDR clip is tone-mapped, and
-    ``info["hdr"]`` names its transfer: see :func:`gma.data.importers.video.read_frames`). ``max_frames``
+    ``info["hdr"]`` names its transfer: see :func:`gma.data.importers.video.read_frames`; when decoding
+    reached the end of the clip, ``info["frames_total"]`` is its frame count). ``max_frames``
     and ``max_bytes`` (of decoded frames, e.g. :func:`memory_budget`) guard memory: a selection beyond
     either is an error that suggests ``--skip``/``--end``, raised as soon as the bytes run over (before
     the machine does).
@@ -68,6 +69,8 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
             n += 1
             if end is not None and n >= end:
                 break
+        else:
+            info["frames_total"] = n  # decoded to the end of the stream: the clip's frame count
     except InputError:
         raise
     except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file
