@@ -95,13 +95,14 @@ def test_only_the_selected_frames_are_decoded_and_kept(synth_clip, monkeypatch):
 
     _, clip = synth_clip
     every, _ = read_video(clip)
-    for start, end, skip in ((0, None, 3), (2, 9, 2), (5, 6, 1), (9, None, 4)):
+    for start, end, skip in ((0, None, 3), (2, 9, 2), (5, 6, 1), (9, None, 4), (0, 4, 1), (0, None, 1)):
         info: dict = {}
         frames, idx = read_video(clip, start, end, skip, info=info)
         assert idx == frame_range(10, start, end, skip)
         assert np.array_equal(frames, every[idx])
-        # The clip's frame count is known when decoding ran to its end, not when it stopped at `end`.
-        assert info.get("frames_total") == (10 if end is None else None)
+        # The clip's frame count is known when every frame was read to the end (ffmpeg drops the frames
+        # of a selection unseen, and decoding stops at `end`).
+        assert info.get("frames_total") == (10 if (start, end, skip) == (0, None, 1) else None)
     with pytest.raises(ValueError, match="selects nothing of 10 frames"):
         read_video(clip, start=20, skip=2)
     with pytest.raises(ValueError, match="skip >= 1"):
@@ -114,21 +115,24 @@ def test_only_the_selected_frames_are_decoded_and_kept(synth_clip, monkeypatch):
     frames, idx = read_video(clip, skip=4, max_bytes=3 * frame_bytes + 10)
     assert idx == [0, 4, 8]
 
-    kept = []
-
-    def damaged_after_six(path, alpha, info=None):
+    def damaged_after_six(path, alpha, info=None, select=None):
+        """ffmpeg reading a clip whose 7th frame is damaged, with its select filter."""
+        start, end, skip = select or (0, None, 1)
         for i, f in enumerate(every):
             if i == 6:
                 raise RuntimeError("ffmpeg: invalid data found when processing input")
-            frame = f.copy()
-            kept.append(frame)
-            yield frame
+            decoded.append(i)
+            if i >= start and (i - start) % skip == 0 and (end is None or i < end):
+                yield f.copy()
 
     monkeypatch.setattr(video_frames, "read_frames", damaged_after_six)
+    decoded = []
     frames, idx = read_video(clip, 1, 5, 2)
-    assert idx == [1, 3] and len(kept) == 5  # stopped at end = 5
-    with pytest.raises(VideoError, match="damaged or truncated after 6 frames"):
+    assert idx == [1, 3] and decoded == [0, 1, 2, 3]  # stopped after the selection's last frame
+    with pytest.raises(VideoError, match="damaged or truncated after frame 4, the last selected"):
         read_video(clip, skip=2)
+    with pytest.raises(VideoError, match="damaged or truncated after 6 frames"):
+        read_video(clip)
 
 
 def _ffmpeg(*args) -> None:
@@ -178,6 +182,9 @@ def test_hdr_phone_clip_is_tone_mapped(tmp_path, synth_clip, transfer, name, mon
     mapped, _ = read_video(hdr, info=info)
     assert info["hdr"] == name and info["frames_estimate"] == 10
     assert np.abs(mapped.astype(float) - sdr).mean() < 4.0  # measured 1.7 (HLG) and 2.2 (PQ): two lossy encodes
+    # A selection is dropped before the tone mapping (ffmpeg's select filter): the same frames.
+    selected, idx = read_video(hdr, 1, None, 3)
+    assert idx == [1, 4, 7] and np.array_equal(selected, mapped[idx])
     gen = imageio_ffmpeg.read_frames(str(hdr))
     next(gen)
     as_sdr = np.stack([np.frombuffer(f, np.uint8).reshape(sdr.shape[1:]) for f in gen])

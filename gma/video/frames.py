@@ -10,7 +10,7 @@ import numpy as np
 
 from gma.core.errors import InputError
 from gma.data.importers._common import frame_range
-from gma.data.importers.video import read_frames
+from gma.data.importers.video import count_frames, read_frames
 
 __all__ = ["VideoError", "memory_budget", "read_video"]
 
@@ -40,8 +40,9 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
 
     Returns (frames uint8 [T, H, W, 3], source frame indices [T]). Anything ffmpeg reads works
     (mp4, mov, webm, gif, ...); frames come upright and in SDR (an HDR clip is tone-mapped, and
-    ``info["hdr"]`` names its transfer: see :func:`gma.data.importers.video.read_frames`; when decoding
-    reached the end of the clip, ``info["frames_total"]`` is its frame count). ``max_frames``
+    ``info["hdr"]`` names its transfer: see :func:`gma.data.importers.video.read_frames`; when every
+    frame was selected and decoding reached the end of the clip, ``info["frames_total"]`` is its frame
+    count). ``max_frames``
     and ``max_bytes`` (of decoded frames, e.g. :func:`memory_budget`) guard memory: a selection beyond
     either is an error that suggests ``--skip``/``--end``, raised as soon as the bytes run over (before
     the machine does).
@@ -53,24 +54,26 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
         raise VideoError(f"{path}: the file is empty")
     if skip < 1 or start < 0:
         frame_range(0, start, end, skip)  # its error, before any decoding
-    # Only the selected frames are kept, and decoding stops at ``end``: a phone's 30 s 4K clip is 900
-    # frames of 25 MB, more memory than most machines have, where every 8th frame of it is 2.2 GB.
-    frames, idx, selected, n = [], [], 0, 0
+    # Only the selected frames are converted and kept (ffmpeg drops the others right after decoding them),
+    # and decoding stops at ``end``: a phone's 30 s 4K clip is 900 frames of 25 MB, more memory than most
+    # machines have, where every 8th frame of it is 2.2 GB.
+    whole = start == 0 and skip == 1
+    frames, idx, selected, decoded = [], [], 0, 0  # decoded: frames known decoded, up to the last one received
     info = {} if info is None else info
     try:
-        for img in read_frames(path, False, info):
-            if n >= start and (n - start) % skip == 0:
-                selected += 1
-                if max_bytes is not None and selected * img.nbytes > max_bytes:
-                    raise _too_big(path, img, max_bytes, info.get("frames_estimate"), start, end, skip)
-                if max_frames is None or selected <= max_frames:
-                    frames.append(img.copy())
-                    idx.append(n)
-            n += 1
-            if end is not None and n >= end:
-                break
+        for k, img in enumerate(read_frames(path, False, info, None if whole else (start, end, skip))):
+            i = start + k * skip  # the source frame: ffmpeg's select keeps exactly these
+            selected, decoded = k + 1, i + 1
+            if max_bytes is not None and selected * img.nbytes > max_bytes:
+                raise _too_big(path, img, max_bytes, info.get("frames_estimate"), start, end, skip)
+            if max_frames is None or selected <= max_frames:
+                frames.append(img.copy())
+                idx.append(i)
+            if end is not None and i + skip >= end:
+                break  # the selection's last frame: the rest of the clip need not be decoded
         else:
-            info["frames_total"] = n  # decoded to the end of the stream: the clip's frame count
+            if whole:
+                info["frames_total"] = decoded  # decoded to the end of the stream: the clip's frame count
     except InputError:
         raise
     except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file
@@ -79,16 +82,28 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
     except (OSError, RuntimeError) as exc:
         # imageio-ffmpeg raises here when the stream ends early (a truncated download, say) —
         # after the frames it managed to decode.
-        raise VideoError(f"{path}: the video is damaged or truncated after {n} frames "
-                         f"({_last_line(exc)})") from exc
-    if n == 0:
-        raise VideoError(f"{path}: no frames could be decoded (not a video, or a truncated one)")
+        where = (f"after {decoded} frames" if whole or not decoded else
+                 f"after frame {decoded - 1}, the last selected frame it decoded")
+        raise VideoError(f"{path}: the video is damaged or truncated {where} ({_last_line(exc)})") from exc
     if not idx:
+        # Nothing came out: an empty clip, or a selection past its end (which of the two needs the count).
+        n = decoded if whole else _frame_count(path)
+        if n == 0:
+            raise VideoError(f"{path}: no frames could be decoded (not a video, or a truncated one)")
         frame_range(n, start, end, skip)  # raises: the range selects nothing of the n frames
+        raise VideoError(f"{path}: none of frames {start}:{end}:{skip} of {n} could be decoded (a damaged video)")
     if max_frames is not None and selected > max_frames:
         raise VideoError(f"{path}: {selected} frames selected, more than the limit {max_frames}; "
                          "use --skip or --end to select fewer")
     return np.stack(frames), idx
+
+
+def _frame_count(path: Path) -> int:
+    try:
+        return count_frames(path)
+    except ValueError as exc:
+        raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
+                         f"(ffmpeg: {_last_line(exc)})") from exc
 
 
 def _too_big(path: Path, frame: np.ndarray, max_bytes: int, total: int | None, start: int, end: int | None,

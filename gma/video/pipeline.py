@@ -132,7 +132,7 @@ def estimate_sequence(src: str | os.PathLike, out: str | os.PathLike, *, config:
     t0 = time.perf_counter()
     decoded: dict = {}
     frames, idx = read_video(src, cfg.start, cfg.end, cfg.skip, cfg.max_frames, decoded, cfg.max_decoded_bytes)
-    n_src = decoded.get("frames_total")  # None when decoding stopped at --end
+    n_src = decoded.get("frames_total")  # None unless every frame was read to the end (then counted if needed)
     timings["decode"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     frames, K, undistort = video_camera(frames, cfg)
