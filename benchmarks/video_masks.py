@@ -6,7 +6,8 @@ A ``gma synth`` turn (true masks known) is composited over a real room — the b
 ``../shared/data/iper_turn_512.gif``, taken from that clip by the same plate estimate — written to an mp4
 as a phone would, decoded, and MediaPipe run on it. Printed: mask IoU (at one half) and mean absolute
 error of the soft mask against the true masks, over all frames and inside the person's bounding box, for
-MediaPipe's masks and the refined ones; then the same refinement on the iPER clip itself (no ground truth:
+MediaPipe's masks and the refined ones (with ``--size`` above 1280, also the check run at full size rather
+than on frames shrunk to 1280 px, and both times); then the same refinement on the iPER clip itself (no ground truth:
 what it changed) and a picture, ``--figure`` (default docs/video_masks.png): iPER frames, MediaPipe's mask
 and its composite over grey | the refined mask and its composite.
 
@@ -66,7 +67,7 @@ def synthetic(work: Path, frames: int, size: int, room: np.ndarray) -> None:
     from gma.gpu import GpuContext
     from gma.synth.generate import SynthConfig, synthesize
     from gma.video.detect import detect_frames
-    from gma.video.matte import refine_masks
+    from gma.video.matte import MatteConfig, refine_masks
 
     gt_dir = work / "synth_gt"
     gt = read_sequence(gt_dir) if (gt_dir / "cameras.json").is_file() else synthesize(
@@ -94,11 +95,16 @@ def synthetic(work: Path, frames: int, size: int, room: np.ndarray) -> None:
     t0 = time.perf_counter()
     refined, report = refine_masks(video, det.masks)
     secs = time.perf_counter() - t0
+    rows = [("MediaPipe", det.masks, None), ("checked against plate", refined, secs)]
+    if size > MatteConfig.work_side:  # the check on shrunk frames against the check at full size
+        t0 = time.perf_counter()
+        full, _ = refine_masks(video, det.masks, MatteConfig(work_side=size))
+        rows.append(("checked at full size", full, time.perf_counter() - t0))
     print(f"synthetic turn ({len(idx)} frames, {size} px) over the iPER room, mp4, MediaPipe; true masks known")
-    print(f"  {'masks':<22} {'IoU':>7} {'MAE':>8} {'MAE in box':>11}")
-    for name, m in (("MediaPipe", det.masks), ("checked against plate", refined)):
+    print(f"  {'masks':<22} {'IoU':>7} {'MAE':>8} {'MAE in box':>11} {'check, s':>9}")
+    for name, m, t in rows:
         s = _scores(m, truth)
-        print(f"  {name:<22} {s['iou']:7.3f} {s['mae']:8.4f} {s['mae_box']:11.4f}")
+        print(f"  {name:<22} {s['iou']:7.3f} {s['mae']:8.4f} {s['mae_box']:11.4f} {'' if t is None else f'{t:9.1f}'}")
     print(f"  refinement {secs:.1f} s: {json.dumps(report)}")
 
 
