@@ -55,10 +55,16 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
     from gma.train.config import preset
     from gma.train.trainer import Trainer, work_dir
 
-    if out.is_file() and (work_dir(out) / "metrics.json").is_file():
-        return Avatar.load(out), json.loads((work_dir(out) / "metrics.json").read_text())["fit_seconds"]
     cfg = preset("quick", pose={"refine": refine}, **overrides)
-    avatar = Trainer(cfg, seq, out, body=body, ctx=ctx, progress=False).run(resume=True)
+    metrics = work_dir(out) / "metrics.json"
+    stale = False
+    if out.is_file() and metrics.is_file():
+        done = json.loads(metrics.read_text())
+        # (a refined fit from before the pose alignment pass: fit again, from the start)
+        stale = "pose_refinement" in done and cfg.pose.align > 0 and "pose_alignment" not in done
+        if not stale:
+            return Avatar.load(out), done["fit_seconds"]
+    avatar = Trainer(cfg, seq, out, body=body, ctx=ctx, progress=False).run(resume=not stale)
     return avatar, avatar.info["fit_seconds"]
 
 
@@ -71,7 +77,9 @@ def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
         # (scores from before the avatar's own body identity was used lack "identity_delta", those from
         # before coarse-to-fine test-time fitting "coarse_to_fine": redo them)
         refined = res.get("refined", {})
-        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine"):
+        fitted = out.with_suffix(".gma")  # X.eval scores X.gma; an avatar fitted again is scored again
+        newer = not fitted.is_file() or cached.stat().st_mtime >= fitted.stat().st_mtime
+        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer:
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)

@@ -50,6 +50,8 @@ class PoseRefineConfig:
                              "frames adjacent in the sequence")
     start: float = doc(0.25, "fraction of stage 1 before the poses start learning (the avatar first gets "
                              "a rough shape and colour to align against)")
+    align: int = doc(30, "steps per training frame of a pose alignment pass at the end of stage 1: each "
+                         "frame's corrections fitted to its image with the avatar frozen, as at evaluation (0: off)")
 
     def __post_init__(self):
         if self.refine not in REFINE_MODES:

@@ -32,8 +32,8 @@ from gma.train.config import PoseRefineConfig
 from gma.train.losses import picture_loss
 from gma.train.render_step import render_frame
 
-__all__ = ["REFINE_BONES", "PoseCorrections", "PoseRefineConfig", "apply_corrections", "refine_frozen", "refine_wanted",
-           "save_refined_body"]
+__all__ = ["REFINE_BONES", "PoseCorrections", "PoseRefineConfig", "apply_corrections", "fit_corrections",
+           "refine_frozen", "refine_wanted", "save_refined_body"]
 
 # The bones whose rotation is corrected: the ones the video fit estimates (gma.video.rig.FIT_BONES),
 # without fingers — at fitting resolution a finger covers a pixel or two.
@@ -190,8 +190,16 @@ def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, back
     smoothness); the prior still pulls toward the input pose. The first steps compare blurred pictures
     (see ``COARSE_BLUR``). Returns the corrections of ``frames``."""
     corr = PoseCorrections(body, frames.poses, frames.indices)
+    fit_corrections(corr, decoded, body, frames, steps, cfg, background, ctx, progress)
+    return corr
+
+
+def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cfg: PoseRefineConfig,
+                    background: float = 0.5, ctx=None, progress: bool = False, desc: str = "refine poses") -> None:
+    """Each frame's corrections in ``corr`` (from where they are) fitted to its image for ``steps`` steps
+    with the avatar ``decoded`` frozen: what :func:`refine_frozen` does, in place."""
     size = max(frames.images.shape[1:3])
-    bar = tqdm(total=len(frames) * steps, desc="refine poses", unit="step", disable=not progress, leave=False)
+    bar = tqdm(total=len(frames) * steps, desc=desc, unit="step", disable=not progress, leave=False)
     for t in range(len(frames)):
         opt = torch.optim.Adam([{"params": [corr.rot[t]], "lr": cfg.lr_rotation},
                                 {"params": [corr.transl[t]], "lr": cfg.lr_translation}], eps=1e-15)
@@ -215,4 +223,3 @@ def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, back
             opt.zero_grad(set_to_none=True)
             bar.update(1)
     bar.close()
-    return corr

@@ -33,7 +33,7 @@ from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
 from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
 from gma.train.metrics import psnr
-from gma.train.pose_refine import PoseCorrections, refine_wanted, save_refined_body
+from gma.train.pose_refine import PoseCorrections, fit_corrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
 from gma.train.symmetry import DEAD_ZONE, SymmetryPrior
 
@@ -107,8 +107,40 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 
 
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
-# before (a checkpoint from then resumes with it rather than failing the same-config check).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0}
+# before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
+# name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0}
+
+
+def _option_missing(saved: dict, name: str) -> bool:
+    *sections, key = name.split(".")
+    for section in sections:
+        saved = saved.get(section, {})
+    return key not in saved
+
+
+def _with_options(config: dict, options: dict) -> dict:
+    """A deep copy of the config dict ``config`` with the dotted ``options`` set."""
+    out = json.loads(json.dumps(config))
+    for name, value in options.items():
+        *sections, key = name.split(".")
+        d = out
+        for section in sections:
+            d = d.setdefault(section, {})
+        d[key] = value
+    return out
+
+
+def _replace_options(cfg: FitConfig, options: dict) -> FitConfig:
+    """``cfg`` with the dotted ``options`` set (dataclasses are frozen in spirit: replaced, not changed)."""
+    for name, value in options.items():
+        *sections, key = name.split(".")
+        if sections:
+            (section,) = sections
+            cfg = dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **{key: value})})
+        else:
+            cfg = dataclasses.replace(cfg, **{key: value})
+    return cfg
 
 
 class Trainer:
@@ -166,6 +198,7 @@ class Trainer:
         self.timing = {k: 0.0 for k in ("decode", "posing_render_fwd", "render_bwd", "torch_bwd",
                                         "optimizer")}
         self.timed_steps = 0
+        self.align_seconds = 0.0  # the pose alignment pass (--pose.align), not a step: kept out of the split
 
     # -- optimisation set-up ---------------------------------------------------------------------------
     def _optimizer(self, stage: Stage) -> torch.optim.Adam:
@@ -281,6 +314,19 @@ class Trainer:
             rec["subject"] = subject
         return loss, rec, marks
 
+    def _align_poses(self, stage: Stage) -> None:
+        """Each training frame's pose corrections fitted to its image with the stage's avatar frozen (what
+        test-time fitting does): the joint steps move a frame's pose only on the few steps that draw it."""
+        t0 = time.perf_counter()
+        for model, sub in zip(self.models, self.subjects, strict=True):
+            if sub.poses is None:
+                continue
+            with torch.no_grad():
+                decoded = model.decode(stage.layer)
+            fit_corrections(sub.poses, decoded, self.body, sub.frames, self.cfg.pose.align, self.cfg.pose,
+                            self.cfg.background, self.ctx, self.progress, desc="align poses")
+        self.align_seconds += time.perf_counter() - t0
+
     def _preview(self, step: int) -> None:
         with torch.no_grad():
             total = sum(s.steps for s in self.stages)
@@ -300,11 +346,11 @@ class Trainer:
         opt = None
         if resume and ckpt.is_file():
             saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
-            older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and k not in saved}
-            if older and {**saved, **older} == {**cfg_json, **older}:
+            older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and _option_missing(saved, k)}
+            if older and _with_options(saved, older) == _with_options(cfg_json, older):
                 # A fit started before these options existed continues as it began (what they were then).
-                saved = {**saved, **older}
-                self.cfg = dataclasses.replace(self.cfg, **older)
+                saved = _with_options(saved, older)
+                self.cfg = _replace_options(self.cfg, older)
                 cfg_json = self.cfg.to_dict()
                 if self.progress:
                     print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
@@ -314,6 +360,7 @@ class Trainer:
             opt, meta = load_checkpoint(ckpt, self.net, lambda m: self._optimizer(self.stages[m["stage"]]))
             step, elapsed, self.history = meta["step"], meta["elapsed"], meta["history"]
             self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
+            self.align_seconds = meta.get("align_seconds", 0.0)
             if self.progress:
                 print(f"[gma fit] resuming {ckpt} at step {step}/{total}")
         elif resume and self.progress:
@@ -352,10 +399,12 @@ class Trainer:
             bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss.detach()):.4f}", psnr=f"{rec['psnr']:.1f}")
             bar.update(1)
             stage_end = local + 1 == stage.steps
+            if stage_end and si == 0 and len(self.stages) > 1 and self.cfg.pose.align > 0:
+                self._align_poses(stage)
             if step % self.cfg.checkpoint_every == 0 or stage_end:
                 meta = {"step": step, "stage": self._locate(step)[0] if step < total else si,
                         "elapsed": time.perf_counter() - t_start, "history": self.history,
-                        "timing": self.timing, "timed_steps": self.timed_steps}
+                        "timing": self.timing, "timed_steps": self.timed_steps, "align_seconds": self.align_seconds}
                 if meta["stage"] != si:  # the next stage starts with a fresh optimiser
                     opt = self._optimizer(self.stages[meta["stage"]])
                     stage_idx = meta["stage"]
@@ -391,6 +440,8 @@ class Trainer:
                    "resolution": list(self.frames.images.shape[1:3])}
         if shared:
             metrics["subjects"] = shared
+        if self.pose_sets and self.cfg.pose.align > 0:
+            metrics["pose_alignment"] = {"steps_per_frame": self.cfg.pose.align, "seconds": self.align_seconds}
         if self.pose_sets:
             metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
                                           for s in self.subjects if s.poses is not None}
