@@ -324,3 +324,11 @@ def test_eval_poses_the_avatar_with_its_own_identity(seq, anny_body, gpu, tmp_pa
         assert a == pytest.approx(b)
     assert "avatar's own body identity" in format_table(theirs)
     assert "identity" not in format_table(mine)
+
+
+def test_alignment_steps_are_checked():
+    from gma.train.config import preset
+
+    assert preset("quick").pose.align == 30  # on by default; it acts only where poses are refined
+    with pytest.raises(ValueError, match="--pose.align: expected a number of steps >= 0"):
+        preset("quick", pose={"align": -1})

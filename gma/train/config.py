@@ -56,6 +56,8 @@ class PoseRefineConfig:
     def __post_init__(self):
         if self.refine not in REFINE_MODES:
             raise ValueError(f"--pose.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
+        if self.align < 0:
+            raise ValueError(f"--pose.align: expected a number of steps >= 0, got {self.align}")
 
 
 def _stage2_weights() -> LossWeights:
