@@ -127,9 +127,9 @@ def read_frames(path, alpha: bool, info: dict | None = None,
     # The transfer from ffmpeg's description of the file first (no decoding), so that the clip is opened
     # once: opening it to look, then again to tone-map, cost 0.7 s on a 4K clip. The stream ffmpeg
     # decodes has the last word.
-    hdr = probe_transfer(path)
+    hdr = None if alpha else probe_transfer(path)
     gen, meta = start_sdr(hdr)
-    if hdr_transfer(meta) != hdr:
+    if not alpha and hdr_transfer(meta) != hdr:
         gen.close()
         hdr = hdr_transfer(meta)
         gen, meta = start_sdr(hdr)
