@@ -301,7 +301,10 @@ def test_an_interrupted_command_resumes(people, ray_runtime, tmp_path):
     cmd = [sys.executable, "-m", "gma.cli", "batch", people["p1"].source, "-o", str(out), "--steps", "fit", "--quiet",
            "--address", ray_runtime.get_runtime_context().gcs_address, *options]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")])}
-    proc = subprocess.Popen(cmd, cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # Ctrl-C in a terminal reaches a process whose SIGINT is at its default; a suite started in the
+    # background of a non-interactive shell (`make test &`) has it ignored, and children inherit that.
+    proc = subprocess.Popen(cmd, cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     ckpt = out / "p1" / "avatar.fit" / "checkpoint.safetensors"
     deadline = time.monotonic() + 240
     while not ckpt.is_file() and proc.poll() is None and time.monotonic() < deadline:
