@@ -77,8 +77,7 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
     except InputError:
         raise
     except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file
-        raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
-                         f"(ffmpeg: {_last_line(exc)})") from exc
+        raise _undecodable(path, exc) from exc
     except (OSError, RuntimeError) as exc:
         # imageio-ffmpeg raises here when the stream ends early (a truncated download, say) —
         # after the frames it managed to decode.
@@ -102,8 +101,12 @@ def _frame_count(path: Path) -> int:
     try:
         return count_frames(path)
     except ValueError as exc:
-        raise VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
-                         f"(ffmpeg: {_last_line(exc)})") from exc
+        raise _undecodable(path, exc) from exc
+
+
+def _undecodable(path: Path, exc: ValueError) -> VideoError:
+    return VideoError(f"{path}: cannot be decoded as a video: not a video file, or a truncated or damaged one "
+                      f"(ffmpeg: {_last_line(exc)})")
 
 
 def _too_big(path: Path, frame: np.ndarray, max_bytes: int, total: int | None, start: int, end: int | None,

@@ -217,7 +217,7 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
     checked = _check(small_frames, small_masks, cfg, report, progress)
     if checked is None:
         return masks, report
-    decisions, known = checked
+    decisions, known_near_person = checked
     out = np.empty_like(masks)  # the one full-size copy
     unmatched = area = added = removed = 0
     for t, decision in enumerate(decisions):
@@ -225,10 +225,9 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
         out[t] = masks[t] if decision is None else _apply(masks[t], decision, f)
         before, after = masks[t] > 0.5, out[t] > 0.5  # a frame at a time: 4K masks are 8 MB each
         area, added, removed = area + before.sum(), added + (after & ~before).sum(), removed + (before & ~after).sum()
-    around = _dilate((small_masks > 0.05).any(0), max(1, round(cfg.margin * small_masks.shape[1])))
     area = max(int(area), 1)
     report.update(applied=True,
-                  known_background_near_person=round(float(known[around].mean()), 4),
+                  known_background_near_person=round(known_near_person, 4),
                   person_area_added=round(float(added) / area, 4),
                   person_area_removed=round(float(removed) / area, 4),
                   frames_left_as_estimated=unmatched,
@@ -237,8 +236,9 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
 
 
 def _check(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig, report: dict, progress: bool):
-    """(each frame's decisions, None for a frame that does not match the plate; where the plate is known), or
-    None, with the reason in ``report``, when the clip's background cannot be used."""
+    """(each frame's decisions, None for a frame that does not match the plate; the share of the person's
+    surroundings whose background is known), or None, with the reason in ``report``, when the clip's
+    background cannot be used."""
     from tqdm import tqdm
 
     T, H, W = masks.shape
@@ -257,6 +257,7 @@ def _check(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig, report: dict
     sigma = np.maximum(cfg.noise_floor, 1.4826 * np.where(known, spread, 0.0)).astype(np.float32)
     radius = max(1, round(cfg.margin * H))
     inner = max(1, round(cfg.opaque_depth * H))
+    around = _dilate((masks > 0.05).any(0), radius)
     decisions = [_refine_frame(frames[t], masks[t], plate, known, sigma, radius, inner, cfg)
                  for t in tqdm(range(T), desc="masks", unit="frame", disable=not progress, leave=False)]
-    return decisions, known
+    return decisions, float(known[around].mean())

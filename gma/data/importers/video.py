@@ -35,14 +35,19 @@ def count_frames(path: str | os.PathLike) -> int:
     """Number of frames in a video file. It decodes the clip once (container frame counts are unreliable),
     but converts nothing: no RGB frames, no tone mapping (an HDR 4K clip counts several times faster than
     it reads)."""
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", str(path), "-map", "0:v:0",
-           "-f", "null", "-"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, errors="replace")
+    proc = _ffmpeg_on(path, "-map", "0:v:0", "-f", "null", "-")
     counts = re.findall(r"frame=\s*(\d+)", proc.stderr)
     if proc.returncode != 0 or not counts:
         lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
         raise ValueError(f"{path}: cannot open as a video ({lines[-1] if lines else 'ffmpeg failed'})")
     return int(counts[-1])
+
+
+def _ffmpeg_on(path, *args: str) -> subprocess.CompletedProcess:
+    """ffmpeg run on input ``path`` with output ``args`` (none: it only describes the file); its log is in
+    ``stderr``."""
+    return subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", str(path), *args],
+                          capture_output=True, text=True, errors="replace")
 
 
 class _RotatedFrameNotice(logging.Filter):
@@ -74,9 +79,7 @@ TO_SDR = ("zscale=t=linear:npl=203,format=gbrpf32le,zscale=p=bt709,tonemap=tonem
 def probe_transfer(path) -> str | None:
     """``"HLG"`` or ``"PQ"`` when ffmpeg's description of the file (``ffmpeg -i``, which decodes nothing)
     names an HDR transfer for its first video stream, else None."""
-    proc = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-nostdin", "-i", str(path)],
-                          capture_output=True, text=True, errors="replace")
-    video = next((ln for ln in proc.stderr.splitlines() if "Video:" in ln), "")
+    video = next((ln for ln in _ffmpeg_on(path).stderr.splitlines() if "Video:" in ln), "")
     return next((name for key, name in HDR_TRANSFERS.items() if key in video), None)
 
 
@@ -115,7 +118,7 @@ def read_frames(path, alpha: bool, info: dict | None = None,
             return open_frames(path, alpha, params + ["-vsync", "passthrough"])  # ffmpeg before 5.1
 
     def start_sdr(hdr):
-        if hdr is None or alpha:
+        if hdr is None:
             return start(vf)
         try:
             return start(vf + [TO_SDR])
@@ -127,13 +130,13 @@ def read_frames(path, alpha: bool, info: dict | None = None,
     # The transfer from ffmpeg's description of the file first (no decoding), so that the clip is opened
     # once: opening it to look, then again to tone-map, cost 0.7 s on a 4K clip. The stream ffmpeg
     # decodes has the last word.
-    hdr = None if alpha else probe_transfer(path)
+    hdr = None if alpha else probe_transfer(path)  # a clip with alpha is read as it is
     gen, meta = start_sdr(hdr)
     if not alpha and hdr_transfer(meta) != hdr:
         gen.close()
         hdr = hdr_transfer(meta)
         gen, meta = start_sdr(hdr)
-    if info is not None and hdr is not None and not alpha:
+    if info is not None and hdr is not None:
         info["hdr"] = hdr
     if info is not None and meta.get("fps") and meta.get("duration"):
         info["frames_estimate"] = round(meta["fps"] * meta["duration"])  # from the header: may be off a little
