@@ -89,7 +89,10 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
         n = decoded if whole else _frame_count(path)
         if n == 0:
             raise VideoError(f"{path}: no frames could be decoded (not a video, or a truncated one)")
-        frame_range(n, start, end, skip)  # raises: the range selects nothing of the n frames
+        try:
+            frame_range(n, start, end, skip)  # raises: the range selects nothing of the n frames
+        except ValueError as exc:
+            raise VideoError(f"{path}: {exc}") from None
         raise VideoError(f"{path}: none of frames {start}:{end}:{skip} of {n} could be decoded (a damaged video)")
     if max_frames is not None and selected > max_frames:
         raise VideoError(f"{path}: {selected} frames selected, more than the limit {max_frames}; "
