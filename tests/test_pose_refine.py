@@ -166,7 +166,7 @@ def test_alignment_pass_fits_the_training_poses(repeated_seq, anny_body, gpu, tm
     """``--pose.align N``: at the end of stage 1 each training frame's pose is fitted to its image with the
     avatar frozen; the injected root errors shrink more than with the joint steps alone."""
     from gma.body.params import load_body
-    from gma.train.trainer import refined_body_path
+    from gma.train.trainer import refined_body_path, work_dir
 
     s, truth = repeated_seq
     errors = {}
@@ -178,6 +178,13 @@ def test_alignment_pass_fits_the_training_poses(repeated_seq, anny_body, gpu, tm
     before = _root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
     # measured: root error 2.86 deg as given, 2.67 after the joint steps alone, 1.36 with the alignment
     assert errors[20][0] < 0.7 * errors[0][0] and errors[20][0] < 0.6 * before[0], (before, errors)
+    metrics = {a: json.loads((work_dir(tmp_path / f"a{a}.gma") / "metrics.json").read_text()) for a in errors}
+    assert metrics[20]["pose_alignment"]["steps_per_frame"] == 20 and "pose_alignment" not in metrics[0]
+    # the one-stage ablation has no end of stage 1 to align at, and its metrics do not claim a pass
+    _fit(s, tmp_path / "one.gma", anny_body, gpu, training="one_stage", stage1_steps=3, stage2_steps=2,
+         pose={"refine": "on", "align": 20})
+    one = json.loads((work_dir(tmp_path / "one.gma") / "metrics.json").read_text())
+    assert "pose_refinement" in one and "pose_alignment" not in one
 
 
 @pytest.mark.slow

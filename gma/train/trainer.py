@@ -14,7 +14,6 @@ Sequences with estimated poses (from ``gma import video``) also learn per-frame 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import time
 from dataclasses import dataclass
@@ -129,18 +128,6 @@ def _with_options(config: dict, options: dict) -> dict:
             d = d.setdefault(section, {})
         d[key] = value
     return out
-
-
-def _replace_options(cfg: FitConfig, options: dict) -> FitConfig:
-    """``cfg`` with the dotted ``options`` set (dataclasses are frozen in spirit: replaced, not changed)."""
-    for name, value in options.items():
-        *sections, key = name.split(".")
-        if sections:
-            (section,) = sections
-            cfg = dataclasses.replace(cfg, **{section: dataclasses.replace(getattr(cfg, section), **{key: value})})
-        else:
-            cfg = dataclasses.replace(cfg, **{key: value})
-    return cfg
 
 
 class Trainer:
@@ -314,6 +301,11 @@ class Trainer:
             rec["subject"] = subject
         return loss, rec, marks
 
+    def _aligns_poses(self) -> bool:
+        """Whether the fit runs the pose alignment pass: poses refined, ``--pose.align`` > 0, and a stage 1
+        to end (the one-stage ablation has none)."""
+        return bool(self.pose_sets) and self.cfg.pose.align > 0 and len(self.stages) > 1
+
     def _align_poses(self, stage: Stage) -> None:
         """Each training frame's pose corrections fitted to its image with the stage's avatar frozen (what
         test-time fitting does): the joint steps move a frame's pose only on the few steps that draw it."""
@@ -350,7 +342,7 @@ class Trainer:
             if older and _with_options(saved, older) == _with_options(cfg_json, older):
                 # A fit started before these options existed continues as it began (what they were then).
                 saved = _with_options(saved, older)
-                self.cfg = _replace_options(self.cfg, older)
+                self.cfg = FitConfig.from_dict(_with_options(self.cfg.to_dict(), older))
                 cfg_json = self.cfg.to_dict()
                 if self.progress:
                     print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
@@ -399,7 +391,7 @@ class Trainer:
             bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss.detach()):.4f}", psnr=f"{rec['psnr']:.1f}")
             bar.update(1)
             stage_end = local + 1 == stage.steps
-            if stage_end and si == 0 and len(self.stages) > 1 and self.cfg.pose.align > 0:
+            if stage_end and si == 0 and self._aligns_poses():
                 self._align_poses(stage)
             if step % self.cfg.checkpoint_every == 0 or stage_end:
                 meta = {"step": step, "stage": self._locate(step)[0] if step < total else si,
@@ -440,7 +432,7 @@ class Trainer:
                    "resolution": list(self.frames.images.shape[1:3])}
         if shared:
             metrics["subjects"] = shared
-        if self.pose_sets and self.cfg.pose.align > 0:
+        if self._aligns_poses():
             metrics["pose_alignment"] = {"steps_per_frame": self.cfg.pose.align, "seconds": self.align_seconds}
         if self.pose_sets:
             metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
