@@ -69,17 +69,20 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
 
 
 def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
+    from gma.train.config import PoseRefineConfig
     from gma.train.evaluate import evaluate
 
     cached = out / f"metrics_{split}.json"
     if cached.is_file():
         res = json.loads(cached.read_text())
         # (scores from before the avatar's own body identity was used lack "identity_delta", those from
-        # before coarse-to-fine test-time fitting "coarse_to_fine": redo them)
+        # before coarse-to-fine test-time fitting "coarse_to_fine", those from before the squared error in its
+        # loss "mse": redo them)
         refined = res.get("refined", {})
         fitted = out.with_suffix(".gma")  # X.eval scores X.gma; an avatar fitted again is scored again
         newer = not fitted.is_file() or cached.stat().st_mtime >= fitted.stat().st_mtime
-        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer:
+        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer \
+                and refined.get("mse", 0.0) == PoseRefineConfig().mse:
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)

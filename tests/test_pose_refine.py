@@ -339,3 +339,6 @@ def test_alignment_steps_are_checked():
     assert preset("quick").pose.align == 30  # on by default; it acts only where poses are refined
     with pytest.raises(ValueError, match="--pose.align: expected a number of steps >= 0"):
         preset("quick", pose={"align": -1})
+    assert preset("quick").pose.mse == 10.0
+    with pytest.raises(ValueError, match="--pose.mse: expected a weight >= 0"):
+        preset("quick", pose={"mse": -1.0})

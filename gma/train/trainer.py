@@ -108,7 +108,8 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0}
+# (pose.mse weighs test-time fitting only, so a fit from before it resumes exactly with the default)
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.mse": 10.0}
 
 
 def _option_missing(saved: dict, name: str) -> bool:
