@@ -69,8 +69,8 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
 
 
 def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
-    from gma.train.config import PoseRefineConfig
     from gma.train.evaluate import evaluate
+    from gma.train.pose_refine import TEST_TIME_MSE
 
     cached = out / f"metrics_{split}.json"
     if cached.is_file():
@@ -82,7 +82,7 @@ def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
         fitted = out.with_suffix(".gma")  # X.eval scores X.gma; an avatar fitted again is scored again
         newer = not fitted.is_file() or cached.stat().st_mtime >= fitted.stat().st_mtime
         if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer \
-                and refined.get("mse", 0.0) == PoseRefineConfig().mse:
+                and refined.get("mse", 0.0) == TEST_TIME_MSE:
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)

@@ -48,9 +48,6 @@ class PoseRefineConfig:
                              "rotation correction (rad^2, mean over bones) and root shift (per 30 cm)^2")
     smooth: float = doc(0.1, "smoothness: weight of the squared difference between the corrections of "
                              "frames adjacent in the sequence")
-    mse: float = doc(10.0, "weight of the mean squared colour error in test-time pose fitting (gma eval "
-                           "--refine-poses), beside L1 and SSIM: bounding-box PSNR of the iPER clip's held-out "
-                           "frames 26.01 -> 26.17 dB (docs/fitting.md); the fit's alignment pass does not use it")
     start: float = doc(0.25, "fraction of stage 1 before the poses start learning (the avatar first gets "
                              "a rough shape and colour to align against)")
     align: int = doc(30, "steps per training frame of a pose alignment pass at the end of stage 1: each "
@@ -59,8 +56,6 @@ class PoseRefineConfig:
     def __post_init__(self):
         if self.refine not in REFINE_MODES:
             raise ValueError(f"--pose.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
-        if self.mse < 0:
-            raise ValueError(f"--pose.mse: expected a weight >= 0, got {self.mse}")
         if self.align < 0:
             raise ValueError(f"--pose.align: expected a number of steps >= 0, got {self.align}")
 

@@ -108,8 +108,10 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-# (pose.mse weighs test-time fitting only, so a fit from before it resumes exactly with the default)
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.mse": 10.0}
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0}
+# Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
+# test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
+OPTIONS_REMOVED = ("pose.mse",)
 
 
 def _option_missing(saved: dict, name: str) -> bool:
@@ -117,6 +119,18 @@ def _option_missing(saved: dict, name: str) -> bool:
     for section in sections:
         saved = saved.get(section, {})
     return key not in saved
+
+
+def _without_options(config: dict, names) -> dict:
+    """A deep copy of the config dict ``config`` without the dotted ``names``."""
+    out = json.loads(json.dumps(config))
+    for name in names:
+        *sections, key = name.split(".")
+        d = out
+        for section in sections:
+            d = d.get(section, {})
+        d.pop(key, None)
+    return out
 
 
 def _with_options(config: dict, options: dict) -> dict:
@@ -339,6 +353,7 @@ class Trainer:
         opt = None
         if resume and ckpt.is_file():
             saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
+            saved = _without_options(saved, OPTIONS_REMOVED)
             older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and _option_missing(saved, k)}
             if older and _with_options(saved, older) == _with_options(cfg_json, older):
                 # A fit started before these options existed continues as it began (what they were then).
