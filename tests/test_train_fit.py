@@ -113,8 +113,14 @@ def test_resume_matches_uninterrupted(seq, anny_body, gpu, tmp_path, monkeypatch
     resumed = _fit(seq, tmp_path / "cut.gma", anny_body, gpu, resume=True)
     a, b = _state(full), _state(resumed)
     for k in a:
-        # GPU float atomics may sum gradients in another order, hence a tolerance rather than equality.
-        assert torch.allclose(a[k], b[k], atol=1e-4, rtol=1e-3), k
+        # GPU float atomics may sum gradients in another order, hence a tolerance rather than equality. A
+        # feature that (almost) no pixel sees gets a gradient near zero whose sign can follow that order, and
+        # Adam turns it into a step of a fraction of the learning rate (0.05): measured, 5 of f_tex's 219,360
+        # values 3.2e-4 apart in about one run in three. A resume that lost the optimizer state or a step
+        # would move all of them.
+        far = ~torch.isclose(a[k], b[k], atol=1e-4, rtol=1e-3)
+        assert int(far.sum()) <= max(1, a[k].numel() // 10_000), (k, int(far.sum()), a[k].numel())
+        assert float((a[k] - b[k]).abs().max()) < 0.01, (k, float((a[k] - b[k]).abs().max()))
 
 
 @pytest.mark.parametrize("variant", [{"training": "one_stage"}, {"avatar": {"representation": "mesh_only"}},
