@@ -114,22 +114,26 @@ OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0}
 OPTIONS_REMOVED = ("pose.mse",)
 
 
-def _option_missing(saved: dict, name: str) -> bool:
+def _section_of(config: dict, name: str, create: bool = False) -> tuple[dict, str]:
+    """The dict of config dict ``config`` that holds the dotted option ``name``, and its key there. A
+    missing section is created when ``create``, else read as empty."""
     *sections, key = name.split(".")
     for section in sections:
-        saved = saved.get(section, {})
-    return key not in saved
+        config = config.setdefault(section, {}) if create else config.get(section, {})
+    return config, key
+
+
+def _option_missing(saved: dict, name: str) -> bool:
+    section, key = _section_of(saved, name)
+    return key not in section
 
 
 def _without_options(config: dict, names) -> dict:
     """A deep copy of the config dict ``config`` without the dotted ``names``."""
     out = json.loads(json.dumps(config))
     for name in names:
-        *sections, key = name.split(".")
-        d = out
-        for section in sections:
-            d = d.get(section, {})
-        d.pop(key, None)
+        section, key = _section_of(out, name)
+        section.pop(key, None)
     return out
 
 
@@ -137,11 +141,8 @@ def _with_options(config: dict, options: dict) -> dict:
     """A deep copy of the config dict ``config`` with the dotted ``options`` set."""
     out = json.loads(json.dumps(config))
     for name, value in options.items():
-        *sections, key = name.split(".")
-        d = out
-        for section in sections:
-            d = d.setdefault(section, {})
-        d[key] = value
+        section, key = _section_of(out, name, create=True)
+        section[key] = value
     return out
 
 
