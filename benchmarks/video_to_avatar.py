@@ -60,8 +60,11 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
     stale = False
     if out.is_file() and metrics.is_file():
         done = json.loads(metrics.read_text())
-        # (a refined fit from before the pose alignment pass: fit again, from the start)
-        stale = "pose_refinement" in done and cfg.pose.align > 0 and "pose_alignment" not in done
+        # (a refined fit from before the pose alignment pass, or from before the twist bones were refined:
+        # fit again, from the start)
+        bones = json.loads((work_dir(out) / "config.json").read_text()).get("pose", {}).get("bones", "video")
+        stale = "pose_refinement" in done and ((cfg.pose.align > 0 and "pose_alignment" not in done)
+                                               or bones != cfg.pose.bones)
         if not stale:
             return Avatar.load(out), done["fit_seconds"]
     avatar = Trainer(cfg, seq, out, body=body, ctx=ctx, progress=False).run(resume=not stale)
@@ -70,19 +73,19 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
 
 def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
     from gma.train.evaluate import evaluate
-    from gma.train.pose_refine import TEST_TIME_MSE
+    from gma.train.pose_refine import TEST_TIME_MSE, PoseRefineConfig
 
     cached = out / f"metrics_{split}.json"
     if cached.is_file():
         res = json.loads(cached.read_text())
         # (scores from before the avatar's own body identity was used lack "identity_delta", those from
         # before coarse-to-fine test-time fitting "coarse_to_fine", those from before the squared error in its
-        # loss "mse": redo them)
+        # loss "mse", those from before the twist bones were refined "bones": redo them)
         refined = res.get("refined", {})
         fitted = out.with_suffix(".gma")  # X.eval scores X.gma; an avatar fitted again is scored again
         newer = not fitted.is_file() or cached.stat().st_mtime >= fitted.stat().st_mtime
         if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer \
-                and refined.get("mse", 0.0) == TEST_TIME_MSE:
+                and refined.get("mse", 0.0) == TEST_TIME_MSE and refined.get("bones") == PoseRefineConfig().bones:
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)

@@ -6,6 +6,7 @@ on known images."""
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 from types import SimpleNamespace
@@ -172,8 +173,11 @@ def test_alignment_pass_fits_the_training_poses(repeated_seq, anny_body, gpu, tm
     errors = {}
     for align in (0, 20):
         out = tmp_path / f"a{align}.gma"
+        # the video fit's bones: the injected errors are root turns only; with the default set the hips
+        # and thighs' twist take a share of them on this 64 px frame (root error 2.69 deg after the
+        # joint steps, 1.94 with the pass)
         _fit(s, out, anny_body, gpu, stage1_steps=30, stage2_steps=2,
-             pose={"refine": "on", "smooth": 0.0, "prior": 0.1, "align": align})
+             pose={"refine": "on", "smooth": 0.0, "prior": 0.1, "align": align, "bones": "video"})
         errors[align] = _root_error(torch.as_tensor(load_body(refined_body_path(out)).arrays["pose"][:4]), truth)
     before = _root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
     # measured: root error 2.86 deg as given, 2.67 after the joint steps alone, 1.36 with the alignment
@@ -189,24 +193,29 @@ def test_alignment_pass_fits_the_training_poses(repeated_seq, anny_body, gpu, tm
 
 @pytest.mark.slow
 def test_fit_from_before_the_alignment_pass_resumes_without_it(repeated_seq, anny_body, gpu, tmp_path, capsys):
-    """A checkpoint whose config.json predates ``pose.align`` resumes as it began: with the pass off; one
-    that still has the removed ``pose.mse`` resumes too."""
+    """A checkpoint whose config.json predates ``pose.align`` and ``pose.bones`` resumes as it began: with
+    the pass off and the video fit's 23 bones (the checkpoint's corrections have that many rows); one that
+    still has the removed ``pose.mse`` resumes too."""
     from gma.train.config import preset
     from gma.train.trainer import Trainer, work_dir
 
     s, _ = repeated_seq
     kw = dict(stage1_steps=3, stage2_steps=2, checkpoint_every=1, resolution=32)
-    _fit(s, tmp_path / "old.gma", anny_body, gpu, **kw)
+    _fit(s, tmp_path / "old.gma", anny_body, gpu, **kw, pose={"refine": "on", "smooth": 0.0, "prior": 0.1,
+                                                             "bones": "video"})
     d = work_dir(tmp_path / "old.gma")
     cfg = json.loads((d / "config.json").read_text())
-    del cfg["pose"]["align"]
+    del cfg["pose"]["align"], cfg["pose"]["bones"]
     cfg["pose"]["mse"] = 10.0  # an option that existed for a while (test-time fitting only) and is gone
     (d / "config.json").write_text(json.dumps(cfg))
     capsys.readouterr()
-    Trainer(preset("quick", **{**TINY, **kw, "pose": {"refine": "on", "smooth": 0.0, "prior": 0.1}}), s,
-            tmp_path / "old.gma", body=anny_body, ctx=gpu, progress=True).run(resume=True)
-    assert "resuming it with {'pose.align': 0}" in capsys.readouterr().out
-    assert json.loads((d / "config.json").read_text())["pose"]["align"] == 0
+    trainer = Trainer(preset("quick", **{**TINY, **kw, "pose": {"refine": "on", "smooth": 0.0, "prior": 0.1}}), s,
+                      tmp_path / "old.gma", body=anny_body, ctx=gpu, progress=True)
+    trainer.run(resume=True)
+    assert "resuming it with {'pose.align': 0, 'pose.bones': 'video'}" in capsys.readouterr().out
+    saved = json.loads((d / "config.json").read_text())["pose"]
+    assert saved["align"] == 0 and saved["bones"] == "video"
+    assert trainer.pose_sets[0].rot[0].shape == (23, 3)
 
 
 @pytest.mark.slow
@@ -216,8 +225,12 @@ def test_resume_with_refinement_matches_uninterrupted(repeated_seq, anny_body, g
     from gma.train.trainer import Trainer, refined_body_path
 
     s, _ = repeated_seq
+    # The video fit's 23 bones: lavapipe's float atomics add in varying order (1e-7 differences), and
+    # with the default 36 bones this 32 px fit sometimes amplifies that to 4e-3 within 7 steps even
+    # between two uninterrupted runs (1 run in 3); with 23 bones runs agree to 1e-6. What is tested is
+    # the checkpoint, which holds either set alike.
     kw = dict(stage1_steps=4, stage2_steps=3, checkpoint_every=1, resolution=32,
-              pose={"refine": "on", "start": 0.25, "align": align})
+              pose={"refine": "on", "start": 0.25, "align": align, "bones": "video"})
     _fit(s, tmp_path / "full.gma", anny_body, gpu, **kw)
     calls = {"n": 0}
     orig = Trainer._loss
@@ -261,13 +274,15 @@ def test_coarse_to_fine_blur():
     assert point.grad is not None and float(point.grad.abs().sum()) > 0
 
 
-@pytest.mark.slow
-def test_eval_refine_poses_improves_perturbed_frame(seq, anny_body, gpu, tmp_path):
+@pytest.fixture(scope="module")
+def frozen_frame(seq, anny_body, gpu, tmp_path_factory):
+    """An avatar fitted on trusted poses (decoded, frozen) and its first training frame at 64 px:
+    (decoded avatar, one-frame FrameSet with the true pose, a scoring function of [1, J, 4, 4] poses)."""
     from gma.train.data import load_frames
     from gma.train.evaluate import _score
-    from gma.train.pose_refine import PoseCorrections, fit_corrections, refine_frozen
 
-    avatar = _fit(seq, tmp_path / "t.gma", anny_body, gpu, pose={"refine": "off"}, stage1_steps=120)
+    avatar = _fit(seq, tmp_path_factory.mktemp("frozen") / "t.gma", anny_body, gpu, pose={"refine": "off"},
+                  stage1_steps=120)
     with torch.no_grad():
         decoded = avatar.decode()
     frames = load_frames(seq, anny_body, "train", 64)
@@ -275,24 +290,65 @@ def test_eval_refine_poses_improves_perturbed_frame(seq, anny_body, gpu, tmp_pat
     frames = type(frames)(**{k: (v[keep] if torch.is_tensor(v) and k != "shape" else v)
                              for k, v in vars(frames).items()})
     frames.indices = [frames.indices[0]]
-    truth = frames.poses.clone()
-    frames.poses = torch.as_tensor(_perturb(truth.numpy(), [0]))
 
     def score(poses):
         bones = anny_body.bone_transforms({"pose": poses, "shape": frames.shape})
         return _score(decoded, anny_body, frames, bones, 0.5, gpu, None, None, "x", 0)[0]
 
-    corr = refine_frozen(decoded, anny_body, frames, 25, PoseRefineConfig(), 0.5, gpu)
+    return decoded, frames, score
+
+
+@pytest.mark.slow
+def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu):
+    from gma.train.pose_refine import BONE_SETS, PoseCorrections, fit_corrections, refine_frozen
+
+    decoded, frames, score = frozen_frame
+    truth = frames.poses.clone()
+    frames = copy.copy(frames)
+    frames.poses = torch.as_tensor(_perturb(truth.numpy(), [0]))
+    # The video fit's bones: the root error injected here is theirs to correct (measured on them; the
+    # default set's extra bones take a share of a root turn on this tiny 64 px frame).
+    cfg = PoseRefineConfig(bones="video")
+    corr = refine_frozen(decoded, anny_body, frames, 25, cfg, 0.5, gpu)
     refined = corr.all_poses()
     assert score(refined)["psnr"] > score(frames.poses)["psnr"] + 2
     before, after = _root_error(frames.poses, truth), _root_error(refined, truth)
     assert after[0] < 0.7 * before[0], (before, after)
     # the squared colour error (TEST_TIME_MSE) is part of the loss: without it the same steps end elsewhere,
     # on this frame farther from the truth (measured: root 2.90 deg / 0.36 cm with it, 3.36 / 0.83 without)
-    plain = PoseCorrections(anny_body, frames.poses, frames.indices)
-    fit_corrections(plain, decoded, anny_body, frames, 25, PoseRefineConfig(), 0.5, gpu, mse=0.0)
+    plain = PoseCorrections(anny_body, frames.poses, frames.indices, BONE_SETS["video"])
+    fit_corrections(plain, decoded, anny_body, frames, 25, cfg, 0.5, gpu, mse=0.0)
     without = _root_error(plain.all_poses(), truth)
     assert after[0] < without[0] and after[1] < without[1], (after, without)
+
+
+@pytest.mark.slow
+def test_eval_refine_poses_corrects_twist_bones(frozen_frame, anny_body, gpu):
+    """A pose wrong in bones the video fit leaves at rest (a hip and a shoulder turned, a thigh and an
+    upper arm twisted): test-time fitting with the default bone set ("body") moves them and matches the
+    picture better than with the video fit's bones alone, which leave them where they were."""
+    from gma.train.pose_refine import BODY_EXTRA_BONES, refine_frozen
+
+    decoded, frames, score = frozen_frame
+    truth = frames.poses.clone()
+    wrong = truth.clone()
+    for name, rotvec in (("pelvis.L", (0.0, 0.25, 0.0)), ("upperleg02.L", (0.0, 0.0, 0.5)),
+                         ("shoulder01.R", (0.25, 0.0, 0.0)), ("upperarm02.R", (0.5, 0.0, 0.0))):
+        j = anny_body.bone_index(name)
+        wrong[0, j, :3, :3] = roma.rotvec_to_rotmat(torch.tensor(rotvec)) @ wrong[0, j, :3, :3]
+    frames = copy.copy(frames)
+    frames.poses = wrong
+    extra = [anny_body.bone_index(n) for n in BODY_EXTRA_BONES]
+
+    body = refine_frozen(decoded, anny_body, frames, 25, PoseRefineConfig(), 0.5, gpu).all_poses()
+    video = refine_frozen(decoded, anny_body, frames, 25, PoseRefineConfig(bones="video"), 0.5, gpu).all_poses()
+    assert torch.equal(video[0, extra], wrong[0, extra])  # "video" leaves those bones where they were
+    moved = roma.rotmat_geodesic_distance(body[0, extra, :3, :3], wrong[0, extra, :3, :3]).rad2deg()
+    assert float(moved.max()) > 2.0, moved
+    # measured: 23.83 dB as perturbed, 26.35 with the body's bones, 25.84 with the video's. On a 64 px
+    # frame of a briefly fitted avatar the picture does not single out the true twist (the added bones'
+    # mean error went from 6.6 to 8.0 deg while the picture improved), so only the picture is asserted.
+    assert score(body)["psnr"] > score(video)["psnr"] + 0.25 > score(wrong)["psnr"] + 1.0
 
 
 @pytest.mark.slow
@@ -339,6 +395,24 @@ def test_eval_poses_the_avatar_with_its_own_identity(seq, anny_body, gpu, tmp_pa
         assert a == pytest.approx(b)
     assert "avatar's own body identity" in format_table(theirs)
     assert "identity" not in format_table(mine)
+
+
+def test_bone_sets_are_anny_bones(anny_body):
+    """``--pose.bones``: "video" is what the video fit estimates (no fingers), "body" adds the bones it
+    leaves at rest that carry limb, shoulder, hip and neck skin; every name is a bone of Anny, none twice."""
+    from gma.train.pose_refine import BONE_SETS
+    from gma.video.rig import FIT_BONES
+
+    assert set(BONE_SETS["video"]) <= set(FIT_BONES) and "root" in BONE_SETS["video"]
+    body = BONE_SETS["body"]
+    assert body[:len(BONE_SETS["video"])] == BONE_SETS["video"] and len(body) == len(set(body)) == 36
+    assert not set(body[len(BONE_SETS["video"]):]) & set(FIT_BONES)
+    for name in body[len(BONE_SETS["video"]):]:
+        j = anny_body.bone_index(name)
+        # each added bone carries skin of its own (else its correction would be a free, unseen parameter)
+        assert float(anny_body.skin_weights[anny_body.skin_indices == j].sum()) > 10.0, name
+    with pytest.raises(ValueError, match="--pose.bones: expected one of"):
+        PoseRefineConfig(bones="fingers")
 
 
 def test_alignment_steps_are_checked():

@@ -27,6 +27,9 @@ def register(subparsers) -> None:
                         "by about 300, ~30 s a frame for a quick avatar on a 2-core CPU, docs/fitting.md)")
     p.add_argument("--refine-resolution", type=int, default=192,
                    help="longest image side the test-time pose fitting renders at")
+    p.add_argument("--refine-bones", choices=("body", "video"), default="body",
+                   help="bones the test-time pose fitting corrects: body (also the limbs' twist bones, shoulders, "
+                        "hips) or video (the ones the video fit estimates), as --pose.bones of gma fit")
     p.add_argument("--threads", type=int, default=1,
                    help="torch CPU threads (0: torch's default). 1 is fastest on a small CPU, where torch and "
                         "the lavapipe rasteriser compete for cores (pose fitting of a quick avatar at 192 px, 2 cores, "
@@ -42,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from gma.avatar import Avatar
     from gma.core.errors import InputError
     from gma.data import read_sequence
+    from gma.train.config import PoseRefineConfig
     from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
 
     if args.threads:
@@ -59,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
     if args.refine_poses < 0:
         raise InputError(f"--refine-poses: expected a number of steps >= 0, got {args.refine_poses}")
     results = evaluate_splits(avatar, seq, splits, out, args.resolution, args.background, images=args.images,
-                              refine_steps=args.refine_poses, refine_resolution=args.refine_resolution)
+                              refine_steps=args.refine_poses, refine_resolution=args.refine_resolution,
+                              refine=PoseRefineConfig(bones=args.refine_bones))
     geometry = results["geometry"]
     if geometry is not None:  # synthetic sequences carry the true clothed mesh
         print("mesh layer vs ground-truth clothed mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in geometry.items()))

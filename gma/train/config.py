@@ -12,6 +12,8 @@ __all__ = ["PRESETS", "FitConfig", "LossWeights", "PoseRefineConfig", "preset"]
 
 TRAINING_MODES = ("two_stage", "one_stage")
 REFINE_MODES = ("auto", "on", "off")
+# Which bones pose refinement corrects (gma.train.pose_refine.BONE_SETS holds the names).
+BONE_SET_NAMES = ("body", "video")
 
 
 @dataclass
@@ -52,12 +54,17 @@ class PoseRefineConfig:
                              "a rough shape and colour to align against)")
     align: int = doc(30, "steps per training frame of a pose alignment pass at the end of stage 1: each "
                          "frame's corrections fitted to its image with the avatar frozen, as at evaluation (0: off)")
+    bones: str = doc("body", "which bones are corrected: body (36: the video fit's 23 plus the arm and leg "
+                             "twist bones, shoulders, hips and the upper neck) or video (the 23 the video "
+                             "fit estimates)")
 
     def __post_init__(self):
         if self.refine not in REFINE_MODES:
             raise ValueError(f"--pose.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
         if self.align < 0:
             raise ValueError(f"--pose.align: expected a number of steps >= 0, got {self.align}")
+        if self.bones not in BONE_SET_NAMES:
+            raise ValueError(f"--pose.bones: expected one of {BONE_SET_NAMES}, got {self.bones!r}")
 
 
 def _stage2_weights() -> LossWeights:

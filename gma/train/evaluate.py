@@ -36,8 +36,8 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
     ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim, psnr_bbox, ssim_bbox,
-    mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "resolution", "coarse_to_fine", "frames",
-    "mean", "poses"} when ``refine_steps`` > 0: each frame's pose first optimised for that many steps at
+    mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "resolution", "coarse_to_fine", "mse", "bones",
+    "frames", "mean", "poses"} when ``refine_steps`` > 0: each frame's pose first optimised for that many steps at
     ``refine_resolution`` against its image with the avatar frozen (``refine``: learning rates and prior;
     coarse to fine, see :func:`gma.train.pose_refine.refine_frozen`), then scored again.
 
@@ -57,14 +57,15 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
               "identity_delta": _identity_delta(avatar, seq, frames.indices[0]), "frames": rows, "mean": _mean(rows)}
     if refine_steps > 0:
         small = load_frames(seq, body, split, min(refine_resolution, resolution), identity=avatar.shape)
-        corr = refine_frozen(decoded, body, small, refine_steps, refine or PoseRefineConfig(), background, ctx,
-                             progress=progress)
+        refine = refine or PoseRefineConfig()
+        corr = refine_frozen(decoded, body, small, refine_steps, refine, background, ctx, progress=progress)
         poses = corr.all_poses()
         with torch.no_grad():
             bones = body.bone_transforms({"pose": poses, "shape": frames.shape})
         rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images)
         result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]), "coarse_to_fine": True,
-                             "mse": TEST_TIME_MSE, "frames": rows_r, "mean": _mean(rows_r), "poses": corr.summary()}
+                             "mse": TEST_TIME_MSE, "bones": refine.bones, "frames": rows_r, "mean": _mean(rows_r),
+                             "poses": corr.summary()}
     if out_dir is not None:
         out_dir = Path(out_dir)
         atomic_write_json(out_dir / f"metrics_{split}.json", result)

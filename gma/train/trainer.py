@@ -32,7 +32,7 @@ from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
 from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
 from gma.train.metrics import psnr
-from gma.train.pose_refine import PoseCorrections, fit_corrections, refine_wanted, save_refined_body
+from gma.train.pose_refine import BONE_SETS, PoseCorrections, fit_corrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
 from gma.train.symmetry import DEAD_ZONE, SymmetryPrior
 
@@ -108,7 +108,7 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0}
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video"}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -173,17 +173,13 @@ class Trainer:
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
                 avatar.model.share_decoders_with(self.subjects[0].avatar.model)
-            poses = PoseCorrections(self.body, frames.poses, frames.indices) if refine_wanted(cfg.pose, s) else None
-            self.subjects.append(Subject(o.stem, s, frames, avatar, o, poses))
+            self.subjects.append(Subject(o.stem, s, frames, avatar, o))
         first = self.subjects[0]
         self.seq, self.frames, self.avatar, self.model = first.seq, first.frames, first.avatar, first.avatar.model
         self.models = [s.avatar.model for s in self.subjects]
         # What the checkpoint holds and the optimiser walks (shared decoders appear once in parameters()).
         self.avatar_net = self.model if len(self.models) == 1 else nn.ModuleList(self.models)
-        self.pose_sets = [s.poses for s in self.subjects if s.poses is not None]
-        self.net = self.avatar_net
-        if self.pose_sets:  # checkpoint keys change only for fits that refine poses
-            self.net = nn.ModuleDict({"avatar": self.avatar_net, "poses": nn.ModuleList(self.pose_sets)})
+        self._attach_poses()
         self.frozen_decoders = False
         if cfg.decoders:
             state = load_decoders(cfg.decoders, cfg.avatar)
@@ -345,6 +341,20 @@ class Trainer:
         save_png(self.dir / "previews" / f"step_{step:06d}.png", img)
 
     # -- the loop --------------------------------------------------------------------------------------
+    def _attach_poses(self) -> None:
+        """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``), and ``self.net``,
+        what the checkpoint holds: the avatar(s), plus the corrections when there are any."""
+        from torch import nn
+
+        bones = BONE_SETS[self.cfg.pose.bones]
+        for sub in self.subjects:
+            sub.poses = (PoseCorrections(self.body, sub.frames.poses, sub.frames.indices, bones)
+                         if refine_wanted(self.cfg.pose, sub.seq) else None)
+        self.pose_sets = [s.poses for s in self.subjects if s.poses is not None]
+        self.net = self.avatar_net
+        if self.pose_sets:  # checkpoint keys change only for fits that refine poses
+            self.net = nn.ModuleDict({"avatar": self.avatar_net, "poses": nn.ModuleList(self.pose_sets)})
+
     def run(self, resume: bool = False) -> Avatar:
         self.dir.mkdir(parents=True, exist_ok=True)
         ckpt = self.dir / CHECKPOINT_NAME
@@ -361,6 +371,7 @@ class Trainer:
                 saved = _with_options(saved, older)
                 self.cfg = FitConfig.from_dict(_with_options(self.cfg.to_dict(), older))
                 cfg_json = self.cfg.to_dict()
+                self._attach_poses()  # the bone set may be the older one
                 if self.progress:
                     print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
             if saved and saved != cfg_json:
