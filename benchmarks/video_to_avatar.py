@@ -53,7 +53,7 @@ def _import(clip: Path, out: Path, focal, anny) -> dict:
 def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, float]:
     from gma.avatar import Avatar
     from gma.train.config import preset
-    from gma.train.trainer import Trainer, work_dir
+    from gma.train.trainer import OPTIONS_ADDED_SINCE, Trainer, work_dir
 
     cfg = preset("quick", pose={"refine": refine}, **overrides)
     metrics = work_dir(out) / "metrics.json"
@@ -62,7 +62,8 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
         done = json.loads(metrics.read_text())
         # (a refined fit from before the pose alignment pass, or from before the twist bones were refined:
         # fit again, from the start)
-        bones = json.loads((work_dir(out) / "config.json").read_text()).get("pose", {}).get("bones", "video")
+        saved = json.loads((work_dir(out) / "config.json").read_text()).get("pose", {})
+        bones = saved.get("bones", OPTIONS_ADDED_SINCE["pose.bones"])
         stale = "pose_refinement" in done and ((cfg.pose.align > 0 and "pose_alignment" not in done)
                                                or bones != cfg.pose.bones)
         if not stale:
