@@ -12,7 +12,7 @@ import argparse
 
 
 def register(subparsers) -> None:
-    from gma.train.config import BONE_SET_NAMES
+    from gma.train.config import BONE_SET_NAMES, PoseRefineConfig
 
     p = subparsers.add_parser("eval", help="evaluate an avatar on a sequence split", description=__doc__)
     p.add_argument("avatar", help="fitted avatar (.gma)")
@@ -29,7 +29,7 @@ def register(subparsers) -> None:
                         "by about 300, ~30 s a frame for a quick avatar on a 2-core CPU, docs/fitting.md)")
     p.add_argument("--refine-resolution", type=int, default=192,
                    help="longest image side the test-time pose fitting renders at")
-    p.add_argument("--refine-bones", choices=BONE_SET_NAMES, default="body",
+    p.add_argument("--refine-bones", choices=BONE_SET_NAMES, default=PoseRefineConfig().bones,
                    help="bones the test-time pose fitting corrects: body (also the limbs' twist bones, shoulders, "
                         "hips) or video (the ones the video fit estimates), as --pose.bones of gma fit")
     p.add_argument("--threads", type=int, default=1,
