@@ -16,7 +16,8 @@ REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / "benchmarks"
 HELPERS = {"common.py", "fit_helpers.py"}  # modules the scripts import, not scripts
 
-# script -> arguments that make it small; {tmp} is a fresh folder for its outputs. None: skip, with why.
+# script -> arguments that make it small; {tmp} is a fresh folder for its outputs, {repo} this checkout.
+# A string: skip, with why.
 SMOKE: dict[str, list[str] | str] = {
     "render.py": ["--repeats", "1", "--sizes", "64", "--counts", "500"],
     "render_backward.py": ["--repeats", "1", "--counts", "500"],
@@ -30,6 +31,7 @@ SMOKE: dict[str, list[str] | str] = {
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
     "interop.py": ["--size", "32"],
     "edit.py": ["--repeats", "1"],
+    "fit_step.py": ["--work", "{tmp}/work", "--baseline", "{repo}"],
     "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
                        "--repeats", "1", "--stroke-frames", "3"],
     "edit_pictures.py": ["--out", "{tmp}", "--size", "64"],
@@ -59,6 +61,6 @@ def test_benchmark_runs(script, tmp_path):
     if script in NEEDS and not NEEDS[script].is_file():
         pytest.skip(f"needs {NEEDS[script]}, which this checkout lacks")
     env = dict(os.environ, GMA_BENCH_SMOKE="1", PYTHONPATH=str(REPO))
-    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=tmp_path) for a in args)]
+    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=tmp_path, repo=REPO) for a in args)]
     out = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, f"{' '.join(cmd)}\n{out.stdout[-2000:]}\n{out.stderr[-3000:]}"

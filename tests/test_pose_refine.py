@@ -17,7 +17,7 @@ import roma
 import torch
 
 from gma.core.errors import InputError
-from gma.train.metrics import box_metrics, mask_iou, person_box, psnr
+from gma.train.metrics import box_metrics, mask_iou, person_box, psnr, ssim
 from gma.train.pose_refine import PoseRefineConfig, apply_corrections, blurred, coarse_sigma, refine_wanted
 
 # -- fast: formulas against references ----------------------------------------------------------------
@@ -79,6 +79,32 @@ def test_box_metrics_and_iou_on_known_images():
     alpha[10:30, 25:35] = 0.9  # half overlaps: IoU = 100 / 300
     assert mask_iou(alpha, mask) == pytest.approx(1 / 3)
     assert mask_iou(mask, mask) == 1.0 and mask_iou(torch.zeros(h, w, 1), torch.zeros(h, w, 1)) == 1.0
+
+
+def test_ssim_is_the_windowed_definition():
+    """``ssim`` (separable, batched) against SSIM written out with the 2D 11×11 gaussian window per channel:
+    the same sums in another order, so float32 rounding only (values 1e-6, gradients 1e-5 relative)."""
+    g = torch.Generator().manual_seed(3)
+    a = torch.rand(37, 53, 3, generator=g, requires_grad=True)
+    b = (a.detach() + 0.2 * torch.randn(37, 53, 3, generator=g)).clamp(0, 1)
+    x = torch.arange(11, dtype=torch.float32) - 5
+    k = torch.exp(-(x**2) / (2 * 1.5**2))
+    k = k / k.sum()
+    win = (k[:, None] * k[None, :]).expand(3, 1, 11, 11)
+
+    def blur(t):  # [H, W, 3] -> [H, W, 3], zero padded
+        return torch.nn.functional.conv2d(t.permute(2, 0, 1)[None], win, padding=5, groups=3)[0].permute(1, 2, 0)
+
+    mx, my = blur(a), blur(b)
+    sxx, syy, sxy = blur(a * a) - mx**2, blur(b * b) - my**2, blur(a * b) - mx * my
+    c1, c2 = 0.01**2, 0.03**2
+    want = (((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx**2 + my**2 + c1) * (sxx + syy + c2))).mean()
+    got = ssim(a, b)
+    assert 0.3 < float(want.detach()) < 0.95  # a real comparison, not two images that match
+    assert float(got.detach()) == pytest.approx(float(want.detach()), abs=1e-6)
+    gw, = torch.autograd.grad(want, a)
+    gg, = torch.autograd.grad(got, a)
+    assert float((gg - gw).abs().max()) <= 1e-5 * float(gw.abs().max())
 
 
 # -- slow: tiny fits ----------------------------------------------------------------------------------

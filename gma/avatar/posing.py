@@ -40,22 +40,29 @@ def frame_params(model: str, arrays: dict[str, np.ndarray]) -> dict[str, torch.T
 
 class PosedSurfels(dict):
     """means [N, 3], quats [N, 4], scales [N, 2], colors [N, 3], opacities [N], vertices [V, 3] (posed
-    morphed mesh), rest [V, 3] (morphed canonical mesh). A dict so it can be filtered by a mask."""
+    morphed mesh), rest [V, 3] (morphed canonical mesh), and, when surfels were culled, rows [N] (the
+    decoded avatar's surfels these are). A dict so it can be filtered by a mask."""
 
 
 def pose_surfels(decoded: DecodedAvatar, faces: torch.Tensor, skin_indices: torch.Tensor,
                  skin_weights: torch.Tensor, rest_vertices: torch.Tensor,
-                 bone_transforms: torch.Tensor) -> PosedSurfels:
+                 bone_transforms: torch.Tensor, visible_from: torch.Tensor | None = None) -> PosedSurfels:
     """Morph, skin and place the decoded surfels for one frame (differentiable w.r.t. ``decoded``).
 
     rest_vertices: [V, 3] the body's rest vertices of this frame (shape + expression, no morph);
-    bone_transforms: [J, 4, 4] rest->posed.
+    bone_transforms: [J, 4, 4] rest->posed; visible_from: a world->camera matrix [4, 4] (optional):
+    the surfels on faces turned away from that camera (``backfacing_mask``) are dropped before they
+    are placed, which saves placing (and differentiating) the half of them a render would drop.
     """
     rest = rest_vertices + decoded.vertex_offsets
     verts = linear_blend_skinning(rest, skin_indices, skin_weights, bone_transforms)
-    means, quats, scales = place_surfels(verts, faces, decoded.binding)
-    return PosedSurfels(means=means, quats=quats, scales=scales, colors=decoded.colors,
-                        opacities=decoded.opacities, vertices=verts, rest=rest)
+    binding, colors, opacities, extra = decoded.binding, decoded.colors, decoded.opacities, {}
+    if visible_from is not None:
+        rows = backfacing_mask(verts, faces, binding.face_id, visible_from).nonzero().squeeze(1)
+        binding, colors, opacities, extra = binding.select(rows), colors[rows], opacities[rows], {"rows": rows}
+    means, quats, scales = place_surfels(verts, faces, binding)
+    return PosedSurfels(means=means, quats=quats, scales=scales, colors=colors, opacities=opacities,
+                        vertices=verts, rest=rest, **extra)
 
 
 def backfacing_mask(vertices: torch.Tensor, faces: torch.Tensor, face_id: torch.Tensor, viewmat: torch.Tensor,

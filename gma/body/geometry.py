@@ -19,6 +19,7 @@ __all__ = [
     "face_centers",
     "face_frames",
     "face_normals",
+    "frame_from",
     "mesh_edges",
     "mirror_faces",
     "morph_vertices",
@@ -65,10 +66,14 @@ def face_frames(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
     ``gma.body.placement`` and ``shaders/wgsl/body/place.wgsl``.
     """
     a, b, c = _corners(vertices, faces)
-    t = safe_normalize(b - a)
-    n = safe_normalize(torch.linalg.cross(b - a, c - a, dim=-1))
-    bt = torch.linalg.cross(n, t, dim=-1)
-    return torch.stack([t, bt, n], dim=-1)
+    return frame_from(b - a, safe_normalize(torch.linalg.cross(b - a, c - a, dim=-1)))
+
+
+def frame_from(edge: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
+    """[..., 3, 3] the face frame of :func:`face_frames` from a face's first edge (v0 → v1) and its unit
+    normal, for callers that have both already."""
+    t = safe_normalize(edge)
+    return torch.stack([t, torch.linalg.cross(normal, t, dim=-1), normal], dim=-1)
 
 
 def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:

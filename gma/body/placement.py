@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from gma.body.geometry import EPS, face_frames, safe_normalize
+from gma.body.geometry import EPS, frame_from, safe_normalize
 
 __all__ = [
     "SURFEL_LOCAL_DTYPE",
@@ -58,6 +58,10 @@ class SurfelBinding:
 
     def __len__(self) -> int:
         return int(self.face_id.shape[0])
+
+    def select(self, rows: torch.Tensor) -> SurfelBinding:
+        """The surfels ``rows`` (indices or a bool mask [N]) as a binding of their own."""
+        return SurfelBinding(self.face_id[rows], self.uv[rows], self.offset[rows], self.scale[rows], self.quat[rows])
 
     def validate(self, num_faces: int) -> None:
         n = len(self)
@@ -122,7 +126,9 @@ def rotmat_to_quat(m: torch.Tensor) -> torch.Tensor:
     """Rotation matrices [..., 3, 3] → unit quaternions (w, x, y, z) [..., 4], Shepperd's method: take
     the largest of 4w², 4x², 4y², 4z² as the pivot so the square root never nears zero. The WGSL
     kernel uses the same branches, so both return the same sign."""
-    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    # The nine entries in one unbind: its backward is one stack, where nine m[..., i, j] reads each wrote
+    # their gradient into a zero-filled copy of m.
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = m.flatten(-2).unbind(-1)
     trace = m00 + m11 + m22
     cands = torch.stack([trace, m00, m11, m22], -1)
     pivot = cands.argmax(-1)
@@ -130,18 +136,16 @@ def rotmat_to_quat(m: torch.Tensor) -> torch.Tensor:
     def sq(x):
         return torch.sqrt((1.0 + x).clamp_min(EPS)) * 2.0  # = 4·(pivot component)
 
+    dx, dy, dz = m21 - m12, m02 - m20, m10 - m01  # antisymmetric part: 4w·(x, y, z)
+    sxy, sxz, syz = m01 + m10, m02 + m20, m12 + m21  # symmetric part: 4xy, 4xz, 4yz
     s0 = sq(trace)
-    q0 = torch.stack([0.25 * s0, (m[..., 2, 1] - m[..., 1, 2]) / s0, (m[..., 0, 2] - m[..., 2, 0]) / s0,
-                      (m[..., 1, 0] - m[..., 0, 1]) / s0], -1)
+    q0 = torch.stack([0.25 * s0, dx / s0, dy / s0, dz / s0], -1)
     s1 = sq(m00 - m11 - m22)
-    q1 = torch.stack([(m[..., 2, 1] - m[..., 1, 2]) / s1, 0.25 * s1, (m[..., 0, 1] + m[..., 1, 0]) / s1,
-                      (m[..., 0, 2] + m[..., 2, 0]) / s1], -1)
+    q1 = torch.stack([dx / s1, 0.25 * s1, sxy / s1, sxz / s1], -1)
     s2 = sq(m11 - m00 - m22)
-    q2 = torch.stack([(m[..., 0, 2] - m[..., 2, 0]) / s2, (m[..., 0, 1] + m[..., 1, 0]) / s2, 0.25 * s2,
-                      (m[..., 1, 2] + m[..., 2, 1]) / s2], -1)
+    q2 = torch.stack([dy / s2, sxy / s2, 0.25 * s2, syz / s2], -1)
     s3 = sq(m22 - m00 - m11)
-    q3 = torch.stack([(m[..., 1, 0] - m[..., 0, 1]) / s3, (m[..., 0, 2] + m[..., 2, 0]) / s3,
-                      (m[..., 1, 2] + m[..., 2, 1]) / s3, 0.25 * s3], -1)
+    q3 = torch.stack([dz / s3, sxz / s3, syz / s3, 0.25 * s3], -1)
     allq = torch.stack([q0, q1, q2, q3], -2)  # [..., 4, 4]
     return torch.gather(allq, -2, pivot[..., None, None].expand(*pivot.shape, 1, 4)).squeeze(-2)
 
@@ -155,14 +159,25 @@ def place_surfels(
     posed mesh, in the renderer's input conventions. Differentiable w.r.t. ``vertices`` and every
     float field of ``binding``."""
     fid = binding.face_id
-    f = faces[fid]  # [N, 3]
-    a, b, c = vertices[f[:, 0]], vertices[f[:, 1]], vertices[f[:, 2]]
-    u, v = binding.uv[:, :1], binding.uv[:, 1:]
+    # What belongs to a face (normal, frame and its quaternion, area) is computed once for each face the
+    # binding uses and gathered per surfel: a face carries N_k surfels (2-4), and computing it per surfel
+    # made this function and its backward most of the torch time of a training or pose-fitting step.
+    # The values are the same bit for bit; gradients sum the surfels of a face in another order.
+    used = torch.zeros(faces.shape[0], dtype=torch.bool, device=fid.device)
+    used[fid] = True
+    face_rows = used.nonzero().squeeze(1)  # the faces some surfel sits on
+    slot = (torch.cumsum(used, 0) - 1)[fid]  # each surfel's row in face_rows
+    a, b, c = vertices[faces[face_rows]].unbind(1)  # [F', 3] each: the corners V1, V2, V3
     cross = torch.linalg.cross(b - a, c - a, dim=-1)
-    n = safe_normalize(cross)
-    means = u * a + v * b + (1 - u - v) * c + binding.offset[:, None] * n
-    frame = face_frames(vertices, faces[fid])  # [N, 3, 3] per surfel (faces repeat; cheap, and simpler)
-    quats = quat_multiply(rotmat_to_quat(frame), binding.quat)
+    normal = safe_normalize(cross)
+    face_quat = rotmat_to_quat(frame_from(b - a, normal))
     area = 0.5 * cross.norm(dim=-1, keepdim=True)
-    scales = binding.scale * torch.sqrt(area.clamp_min(0.0) + EPS)
+    face_size = torch.sqrt(area.clamp_min(0.0) + EPS)
+    # One gather of everything per surfel (one scatter in the backward instead of six).
+    a, b, c, normal, face_quat, face_size = torch.cat([a, b, c, normal, face_quat, face_size], -1)[slot].split(
+        [3, 3, 3, 3, 4, 1], -1)
+    u, v = binding.uv[:, :1], binding.uv[:, 1:]
+    means = u * a + v * b + (1 - u - v) * c + binding.offset[:, None] * normal
+    quats = quat_multiply(face_quat, binding.quat)
+    scales = binding.scale * face_size
     return means, quats, scales

@@ -163,7 +163,7 @@ class Editor:
               selection: Selection | None = None, name: str = "image") -> Change:
         """Stamp ``image`` [h, w, 4] RGBA seen from ``view`` (see :mod:`gma.edit.stamp`), restricted to
         ``selection`` when given (its weights scale the alpha)."""
-        from gma.body.placement import SurfelBinding, place_surfels
+        from gma.body.placement import place_surfels
 
         placement = placement or StampPlacement()
         nk = self.model.config.fine_per_face
@@ -180,7 +180,7 @@ class Editor:
         asked, placement = placement, StampPlacement((cx, cy), size_px, "px", placement.rotation)
         rows = (cand[:, None] * nk + torch.arange(nk)).reshape(-1)
         b = self.decoded.binding
-        sub = SurfelBinding(b.face_id[rows], b.uv[rows], b.offset[rows], b.scale[rows], b.quat[rows])
+        sub = b.select(rows)
         with torch.no_grad():
             means, _, _ = place_surfels(torch.as_tensor(view.vertices), self.body.faces, sub)
         sw = None if selection is None else selection.face_weights().repeat_interleave(nk)

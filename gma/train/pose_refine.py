@@ -236,8 +236,9 @@ def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cf
             out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=True, bones=bones)
             color, want, alpha, mask = out.color, target, out.alpha, frames.masks[t]
             sigma = coarse_sigma(i, steps, size)
-            if sigma:
-                color, want, alpha, mask = (blurred(x, sigma) for x in (color, want, alpha, mask))
+            if sigma:  # the four pictures through one blur: one pair of convolutions, not four
+                parts = (color, want, alpha, mask)
+                color, want, alpha, mask = blurred(torch.cat(parts, -1), sigma).split([x.shape[-1] for x in parts], -1)
             l1, dssim = picture_loss(color, want)
             r, d = corr.rot[t], corr.transl[t] / TRANSL_UNIT
             loss = (0.8 * l1 + 0.2 * dssim + mse * (color - want).pow(2).mean() + 0.1 * (alpha - mask).abs().mean()
