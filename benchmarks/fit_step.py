@@ -119,7 +119,8 @@ def worker(avatar_path: str, seq_path: str) -> int:
             opt.step()
             opt.zero_grad(set_to_none=True)
 
-    pose_steps(2), train_steps(2)  # compile the pipelines
+    pose_steps(2)  # compile the pipelines
+    train_steps(2)
     print("ready", flush=True)
     for line in sys.stdin:
         kind, k = line.split()
