@@ -8,7 +8,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-__all__ = ["box_metrics", "mask_iou", "person_box", "psnr", "ssim"]
+__all__ = ["box_metrics", "mask_iou", "person_box", "psnr", "separable_blur", "ssim"]
 
 
 def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -23,6 +23,14 @@ def _gaussian(size: int, sigma: float, device) -> torch.Tensor:
     return g / g.sum()
 
 
+def separable_blur(t: torch.Tensor, kernel: torch.Tensor, mode: str = "constant") -> torch.Tensor:
+    """``t`` [1, K, H, W], each channel convolved with the odd 1D ``kernel`` along rows and then columns
+    (a separable 2D window), padded by ``mode`` of ``F.pad`` ("constant": zeros, "replicate"); same size."""
+    k, r = t.shape[1], kernel.numel() // 2
+    t = F.conv2d(F.pad(t, (r, r, 0, 0), mode=mode), kernel.view(1, 1, 1, -1).expand(k, 1, 1, -1), groups=k)
+    return F.conv2d(F.pad(t, (0, 0, r, r), mode=mode), kernel.view(1, 1, -1, 1).expand(k, 1, -1, 1), groups=k)
+
+
 def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
     """Mean structural similarity of [H, W, C] images in [0, 1] (Wang et al. 2004, gaussian 11×11, σ 1.5,
     zero-padded like the 3DGS loss). Differentiable; returns a scalar tensor."""
@@ -30,10 +38,7 @@ def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5)
     x, y = a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None]  # [1, C, H, W]
     # The five local means in one pass, the 11×11 window as a row and a column of 11 taps (the same sums
     # with zero padding, a fifth of the multiplications): SSIM runs in every training and pose-fitting step.
-    stack = torch.cat([x, y, x * x, y * y, x * y], 1)
-    g, k, pad = _gaussian(window, sigma, a.device), stack.shape[1], window // 2
-    stack = F.conv2d(stack, g.view(1, 1, 1, -1).expand(k, 1, 1, window), padding=(0, pad), groups=k)
-    stack = F.conv2d(stack, g.view(1, 1, -1, 1).expand(k, 1, window, 1), padding=(pad, 0), groups=k)
+    stack = separable_blur(torch.cat([x, y, x * x, y * y, x * y], 1), _gaussian(window, sigma, a.device))
     mx, my, exx, eyy, exy = stack.split(c, 1)
     sxx, syy, sxy = exx - mx**2, eyy - my**2, exy - mx * my
     c1, c2 = 0.01**2, 0.03**2

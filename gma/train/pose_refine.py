@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 import roma
 import torch
-import torch.nn.functional as F
 from torch import nn
 from tqdm import tqdm
 
@@ -31,6 +30,7 @@ from gma.body.params import save_body
 from gma.core.errors import InputError
 from gma.train.config import PoseRefineConfig
 from gma.train.losses import picture_loss
+from gma.train.metrics import separable_blur
 from gma.train.render_step import render_frame
 
 __all__ = ["BONE_SETS", "REFINE_BONES", "TEST_TIME_MSE", "PoseCorrections", "PoseRefineConfig", "apply_corrections",
@@ -188,13 +188,7 @@ def blurred(image: torch.Tensor, sigma: float) -> torch.Tensor:
     x = torch.arange(-radius, radius + 1, dtype=image.dtype, device=image.device)
     k = torch.exp(-0.5 * (x / sigma) ** 2)
     k = k / k.sum()
-    c = image.shape[-1]
-    t = image.permute(2, 0, 1)[None]
-    t = F.conv2d(F.pad(t, (radius, radius, 0, 0), mode="replicate"), k.view(1, 1, 1, -1).expand(c, 1, 1, -1),
-                 groups=c)
-    t = F.conv2d(F.pad(t, (0, 0, radius, radius), mode="replicate"), k.view(1, 1, -1, 1).expand(c, 1, -1, 1),
-                 groups=c)
-    return t[0].permute(1, 2, 0)
+    return separable_blur(image.permute(2, 0, 1)[None], k, mode="replicate")[0].permute(1, 2, 0)
 
 
 def coarse_sigma(step: int, steps: int, size: int) -> float:
