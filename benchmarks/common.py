@@ -6,6 +6,8 @@ import importlib.util
 import os
 import platform
 import statistics
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -56,3 +58,46 @@ def workload_surfels(module, n: int) -> tuple[dict, object]:
              "opacities": w["opacities"], "colors": w["colors"]}
     cam = Camera(w["viewmat"], w["K"], module.WIDTH, module.HEIGHT)
     return scene, cam
+
+
+class CheckoutWorker:
+    """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
+    checkout, which prints "ready" once set up and then answers each request line with one line. Lets a
+    benchmark time another checkout (``--baseline``) beside this one, turns interleaved, in one run."""
+
+    def __init__(self, root: str | Path, script: str | Path, *args: str):
+        self.root = self.checkout(root)
+        env = dict(os.environ, PYTHONPATH=str(self.root))
+        self.proc = subprocess.Popen([sys.executable, str(script), "--worker", *args], cwd=self.root, env=env,
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        ready = self.proc.stdout.readline().strip()
+        if not ready.startswith("ready"):
+            raise SystemExit(f"{root}: the worker did not start ({ready!r})")
+
+    @staticmethod
+    def checkout(root: str | Path) -> Path:
+        """``root`` resolved; exits with one line when it is not a GMA checkout (check before slow set-up)."""
+        path = Path(root).resolve()
+        if not (path / "gma" / "__init__.py").is_file():
+            print(f"{root}: not a GMA checkout (no gma/__init__.py)", file=sys.stderr)
+            raise SystemExit(2)
+        return path
+
+    def ask(self, request: str) -> str:
+        self.proc.stdin.write(request + "\n")
+        self.proc.stdin.flush()
+        return self.proc.stdout.readline()
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait()
+
+
+def wrong_checkout() -> str | None:
+    """In a worker: an error line when ``gma`` was not imported from the checkout on PYTHONPATH, else None."""
+    import gma
+
+    root = Path(os.environ["PYTHONPATH"]).resolve()
+    if not Path(gma.__file__).resolve().is_relative_to(root):
+        return f"error: gma imported from {gma.__file__}, not {root}"
+    return None

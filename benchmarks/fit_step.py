@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -25,6 +24,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import CheckoutWorker, machine, wrong_checkout  # noqa: E402
+
 SMOKE = os.environ.get("GMA_BENCH_SMOKE") == "1"
 
 
@@ -52,29 +53,15 @@ def default_inputs(work: Path) -> tuple[Path, Path]:
     return avatar, seq_dir
 
 
-class Worker:
+class Worker(CheckoutWorker):
     """One checkout's GMA in a worker process (this script with ``--worker``): each request times a burst
     of steps there."""
 
     def __init__(self, root: Path, avatar: Path, seq: Path):
-        self.root = root.resolve()
-        if not (self.root / "gma" / "__init__.py").is_file():
-            raise SystemExit(f"{root}: not a GMA checkout (no gma/__init__.py)")
-        env = dict(os.environ, PYTHONPATH=str(self.root))
-        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(avatar), str(seq)], cwd=self.root,
-                                     env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        ready = self.proc.stdout.readline().strip()
-        if ready != "ready":
-            raise SystemExit(f"{root}: the worker did not start ({ready!r})")
+        super().__init__(root, __file__, str(avatar), str(seq))
 
     def time(self, kind: str, steps: int) -> float:
-        self.proc.stdin.write(f"{kind} {steps}\n")
-        self.proc.stdin.flush()
-        return float(self.proc.stdout.readline())
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait()
+        return float(self.ask(f"{kind} {steps}"))
 
 
 def worker(avatar_path: str, seq_path: str) -> int:
@@ -82,7 +69,6 @@ def worker(avatar_path: str, seq_path: str) -> int:
     "train K" with the mean ms of K steps. Uses only calls that earlier checkouts have too."""
     import torch
 
-    import gma
     from gma.avatar import Avatar
     from gma.body import load_body
     from gma.data import read_sequence
@@ -92,9 +78,9 @@ def worker(avatar_path: str, seq_path: str) -> int:
     from gma.train.pose_refine import BONE_SETS, PoseCorrections, PoseRefineConfig, fit_corrections
     from gma.train.render_step import render_frame
 
-    root = Path(os.environ["PYTHONPATH"]).resolve()
-    if not Path(gma.__file__).resolve().is_relative_to(root):
-        print(f"error: gma imported from {gma.__file__}, not {root}", flush=True)
+    error = wrong_checkout()
+    if error:
+        print(error, flush=True)
         return 2
     avatar, seq = Avatar.load(Path(avatar_path)), read_sequence(Path(seq_path))
     body, ctx = load_body(avatar.body_name), get_context()
@@ -156,10 +142,14 @@ def main() -> int:
     ap.add_argument("--sequence", type=Path, help="the avatar's sequence")
     ap.add_argument("--work", type=Path, help="where the default sequence and avatar are kept (default: a temp dir)")
     args = ap.parse_args()
-    from common import machine
-
     if (args.avatar is None) != (args.sequence is None):
         ap.error("--avatar and --sequence go together")
+    if args.avatar is not None and not args.avatar.is_file():
+        ap.error(f"{args.avatar}: no such avatar file")
+    if args.sequence is not None and not (args.sequence / "splits.json").is_file():
+        ap.error(f"{args.sequence}: not a sequence folder (no splits.json)")
+    if args.baseline is not None:
+        CheckoutWorker.checkout(args.baseline)  # before the inputs are made
     with tempfile.TemporaryDirectory() as tmp:
         if args.avatar is None:
             work = args.work or Path(tmp)

@@ -24,9 +24,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import os
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -34,7 +32,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, load_standard_workload, machine  # noqa: E402
+from common import SHARED_WORKLOAD, CheckoutWorker, load_standard_workload, machine, wrong_checkout  # noqa: E402
 
 from gma.gpu import get_context  # noqa: E402
 from gma.render import rasterize  # noqa: E402
@@ -97,39 +95,23 @@ def timed_burst(burst: int, fn, *args) -> list[float]:
     return times
 
 
-class Worker:
+class Worker(CheckoutWorker):
     """A checkout's GMA in a worker process (this script with ``--worker``, its ``gma`` imported from that
     checkout): each request times one step there."""
 
     def __init__(self, root: str | Path, n: int):
-        self.root = Path(root).resolve()
-        if not (self.root / "gma" / "__init__.py").is_file():
-            raise SystemExit(f"{root}: not a GMA checkout (no gma/__init__.py)")
-        env = dict(os.environ, PYTHONPATH=str(self.root))
-        self.proc = subprocess.Popen([sys.executable, __file__, "--worker", str(n)], cwd=self.root, env=env,
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        ready = self.proc.stdout.readline().strip()
-        if not ready.startswith("ready"):
-            raise SystemExit(f"{root}: the worker did not start ({ready!r})")
+        super().__init__(root, __file__, str(n))
 
     def steps(self, backward: bool, burst: int) -> list[float]:
-        self.proc.stdin.write(f"{'bwd' if backward else 'fwd'} {burst}\n")
-        self.proc.stdin.flush()
-        return [float(v) for v in self.proc.stdout.readline().split()]
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait()
+        return [float(v) for v in self.ask(f"{'bwd' if backward else 'fwd'} {burst}").split()]
 
 
 def worker(n: int) -> int:
     """One side (this checkout or the baseline): time a burst of GMA steps per request on stdin ("fwd K" /
     "bwd K"), print their ms."""
-    import gma
-
-    root = Path(os.environ["PYTHONPATH"]).resolve()
-    if not Path(gma.__file__).resolve().is_relative_to(root):
-        print(f"error: gma imported from {gma.__file__}, not {root}", flush=True)
+    error = wrong_checkout()
+    if error:
+        print(error, flush=True)
         return 2
     workload = load_standard_workload()
     ctx = get_context()
