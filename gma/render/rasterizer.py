@@ -110,15 +110,15 @@ class SurfelRasterizer:
 
     # -- variants -----------------------------------------------------------------------------------
     def raster_defines(self, channels: int) -> dict:
-        """Rasterizer variant: a batch size that fits the adapter's workgroup memory (64 B per surfel,
-        4 B of surfel id in the backward, 16 B per 4 channels, and for the subgroup path 4 B of block
-        mask plus a 4 B hit-list entry per subgroup, and SG entries of scratch per subgroup), and the
-        subgroup path on CPU adapters (see rasterize_core.wgsl). On lavapipe (standard scene, 100k
-        surfels) BATCH 128 or 64 was slower than 256, and 512 or 1024 (forward reading hit surfels from
-        storage, so that they fit) no faster."""
+        """Rasterizer variant: a batch size that fits the adapter's workgroup memory (the plain path: 64
+        B per surfel, 4 B of surfel id in the backward, 16 B per 4 channels; the subgroup path, which
+        stages no surfel data: 4 B of block mask plus a 4 B hit-list entry per subgroup, and SG entries
+        of scratch per subgroup), and the subgroup path on CPU adapters (see rasterize_core.wgsl). On
+        lavapipe (standard scene, 100k surfels) BATCH 128 or 64 was slower than 256, and 512 no faster
+        (standard scene and a fitted avatar at 192 px, five runs each, within the runs' scatter)."""
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
         sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
-        per_surfel = 68 + 16 * ((channels + 3) // 4) + (4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 0)
+        per_surfel = 4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 68 + 16 * ((channels + 3) // 4)
         batch = 256
         fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
         while batch > 32 and batch * per_surfel + fixed > limit:

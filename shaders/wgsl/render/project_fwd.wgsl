@@ -14,8 +14,8 @@
 @group(0) @binding(7) var<storage, read_write> tile_counts: array<u32>;           // [N]
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
-// What the rasterizers' subgroup variant stages per intersection, precomputed here once per surfel (see
-// stage_surfel in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
+// What the rasterizers' subgroup variant reads per intersection, precomputed here once per surfel (see
+// block_mask and composite_quad in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
 // (see write_bands below; block_mask turns them into the tile's blocks), and the first four colour channels as one
 // zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
 // the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward

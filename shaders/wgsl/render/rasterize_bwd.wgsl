@@ -68,7 +68,9 @@ fn flush(sid: u32, g: SurfelGrad) {
 #endif
 }
 
+#if !USE_SUBGROUPS
 var<workgroup> batch_ids: array<u32, BATCH>;
+#endif
 var<workgroup> tile_last: atomic<u32>;
 
 // Intersections of the tile (`range`) to replay: up to the furthest last contributor of any of its
@@ -325,9 +327,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         workgroupBarrier();
         let m = min(BATCH, count - start);
         for (var slot = lid; slot < m; slot += RASTER_THREADS) {
-            let sid = isect_ids[range.x + start + slot];
-            batch_ids[slot] = sid;
-            stage_surfel(slot, sid, tile);
+            batch_blocks[slot] = block_mask(isect_ids[range.x + start + slot], tile);
         }
         workgroupBarrier();
         // Surfels pass between lanes by shuffles (see rasterize_core.wgsl, which also explains the hit
@@ -337,9 +337,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
             let n = num_hits - hh - h0;
             let mine_slot = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
-            let mine = batch_surf[mine_slot];
-            let mine_col = batch_color[mine_slot];
-            let mine_id = batch_ids[mine_slot];
+            let mine_id = isect_ids[range.x + start + mine_slot];
+            let mine = projected[mine_id];
+            let mine_col = colors4[mine_id];
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
                 let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
@@ -462,7 +462,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         if lid < BATCH && start + lid < count {
             let sid = isect_ids[range.x + start + lid];
             batch_ids[lid] = sid;
-            stage_surfel(lid, sid, tile);
+            stage_surfel(lid, sid);
         }
         workgroupBarrier();
         let m = min(BATCH, count - start);
