@@ -38,7 +38,7 @@ def default_inputs(work: Path) -> tuple[Path, Path]:
     from gma.train.config import preset
 
     seq_dir, avatar = work / "seq", work / "avatar.gma"
-    if not (seq_dir / "splits.json").is_file():
+    if not (seq_dir / "cameras.json").is_file():
         size = 48 if SMOKE else 256
         synthesize(seq_dir, SynthConfig(width=size, height=size, train_frames=2 if SMOKE else 6, test_pose_frames=1,
                                         test_view_frames=1, supersample=1, texture_size=128 if SMOKE else 512),
@@ -146,8 +146,10 @@ def main() -> int:
         ap.error("--avatar and --sequence go together")
     if args.avatar is not None and not args.avatar.is_file():
         ap.error(f"{args.avatar}: no such avatar file")
-    if args.sequence is not None and not (args.sequence / "splits.json").is_file():
-        ap.error(f"{args.sequence}: not a sequence folder (no splits.json)")
+    if args.sequence is not None:
+        missing = [n for n in ("cameras.json", "body.npz", "images") if not (args.sequence / n).exists()]
+        if missing:  # splits.json is optional (all frames train)
+            ap.error(f"{args.sequence}: not a sequence folder (no {', '.join(missing)})")
     if args.baseline is not None:
         CheckoutWorker.checkout(args.baseline)  # before the inputs are made
     with tempfile.TemporaryDirectory() as tmp:
