@@ -14,7 +14,7 @@ its last quarter shows views no training frame shows; ``--interleaved`` also hol
 frame instead (views between training views) and prints the same rows for that split.
 
     python benchmarks/video_to_avatar.py [--work /tmp/gma-v2a] [--frames 40] [--size 256]
-                                         [--refine-steps 300] [--skip-synth] [--skip-iper] [--interleaved]
+                                         [--refine-steps 500] [--skip-synth] [--skip-iper] [--interleaved]
 
 Everything lands in ``--work`` and is reused on a second run (fits resume from their checkpoints), so
 an interrupted run continues. Needs MediaPipe (``pip install 'gma[video]'``) and a wgpu adapter.
@@ -297,8 +297,9 @@ def main(argv=None) -> int:
     ap.add_argument("--work", default="/tmp/gma-v2a", help="work folder (reused by a second run)")
     ap.add_argument("--frames", type=int, default=40, help="training frames of the synthetic turn")
     ap.add_argument("--size", type=int, default=256, help="synthetic image size")
-    ap.add_argument("--refine-steps", type=int, default=300,
-                    help="test-time pose fitting steps per frame (300: converged, docs/fitting.md)")
+    ap.add_argument("--refine-steps", type=int, default=500,
+                    help="test-time pose fitting steps per frame (500: converged with the 36 refined bones, "
+                         "docs/fitting.md)")
     ap.add_argument("--figure", default=str(REPO / "docs" / "iper_pose_refinement.png"))
     ap.add_argument("--skip-synth", action="store_true")
     ap.add_argument("--skip-iper", action="store_true")
