@@ -147,8 +147,10 @@ def main() -> int:
     if args.avatar is not None and not args.avatar.is_file():
         ap.error(f"{args.avatar}: no such avatar file")
     if args.sequence is not None:
-        missing = [n for n in ("cameras.json", "body.npz", "images") if not (args.sequence / n).exists()]
-        if missing:  # splits.json is optional (all frames train)
+        from gma.data.sequence import REQUIRED_ENTRIES
+
+        missing = [n for n in REQUIRED_ENTRIES if not (args.sequence / n).exists()]
+        if missing:
             ap.error(f"{args.sequence}: not a sequence folder (no {', '.join(missing)})")
     if args.baseline is not None:
         CheckoutWorker.checkout(args.baseline)  # before the inputs are made

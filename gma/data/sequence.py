@@ -34,8 +34,8 @@ from gma.core.errors import InputError
 from gma.core.outputs import prepare_output_dir
 from gma.data.cameras import Cameras, load_cameras, save_cameras, validate_cameras
 
-__all__ = ["SEQUENCE_ENTRIES", "SPLIT_KEYS", "Sequence", "SequenceWriter", "not_a_sequence", "prepare_sequence_output",
-           "read_sequence"]
+__all__ = ["REQUIRED_ENTRIES", "SEQUENCE_ENTRIES", "SPLIT_KEYS", "Sequence", "SequenceWriter", "not_a_sequence",
+           "prepare_sequence_output", "read_sequence"]
 
 SPLIT_KEYS = ("train", "test", "test_pose", "test_view")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -225,6 +225,8 @@ def _to_uint8(a: np.ndarray, name: str) -> np.ndarray:
 
 
 # What a sequence folder written by GMA holds (the format's files and what synth / the video import add).
+# What every sequence folder holds (the rest of SEQUENCE_ENTRIES is optional).
+REQUIRED_ENTRIES = ("cameras.json", "body.npz", "images")
 SEQUENCE_ENTRIES = {"images", "masks", "cameras.json", "body.npz", "splits.json", "gt_mesh.npz", "gt_texture.png",
                     "synth.json", "video_report.json", "video_contact_sheet.png"}
 
@@ -233,7 +235,7 @@ def not_a_sequence(path: Path) -> str | None:
     """None when the folder ``path`` is a sequence as GMA writes them (so ``--force`` may replace it);
     otherwise why it is not (missing format files, or other files that replacing it would delete)."""
     entries = {e.name for e in Path(path).iterdir()}
-    missing = [n for n in ("cameras.json", "body.npz", "images") if n not in entries]
+    missing = [n for n in REQUIRED_ENTRIES if n not in entries]
     if missing:
         return f"no {', '.join(missing)}"
     foreign = sorted(entries - SEQUENCE_ENTRIES)
