@@ -63,16 +63,18 @@ def workload_surfels(module, n: int) -> tuple[dict, object]:
 class CheckoutWorker:
     """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
     checkout, which prints "ready" once set up and then answers each request line with one line. Lets a
-    benchmark time another checkout (``--baseline``) beside this one, turns interleaved, in one run."""
+    benchmark time another checkout (``--baseline``) beside this one, turns interleaved, in one run;
+    ``env`` adds variables for the worker (e.g. ``GMA_LAVAPIPE=system``: the same code on another driver)."""
 
-    def __init__(self, root: str | Path, script: str | Path, *args: str):
+    def __init__(self, root: str | Path, script: str | Path, *args: str, env: dict[str, str] | None = None):
         self.root = self.checkout(root)
-        env = dict(os.environ, PYTHONPATH=str(self.root))
+        env = dict(os.environ, **(env or {}), PYTHONPATH=str(self.root))
         self.proc = subprocess.Popen([sys.executable, str(script), "--worker", *args], cwd=self.root, env=env,
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
         ready = self.proc.stdout.readline().strip()
         if not ready.startswith("ready"):
             raise SystemExit(f"{root}: the worker did not start ({ready!r})")
+        self.banner = ready.removeprefix("ready").strip()  # what the worker says of itself (its adapter)
 
     @staticmethod
     def checkout(root: str | Path) -> Path:
@@ -101,3 +103,15 @@ def wrong_checkout() -> str | None:
     if not Path(gma.__file__).resolve().is_relative_to(root):
         return f"error: gma imported from {gma.__file__}, not {root}"
     return None
+
+
+def parse_env(items: list[str] | None) -> dict[str, str]:
+    """``["KEY=VALUE", ...]`` (a benchmark's ``--baseline-env``) as a dict; exits with one line on a bad item."""
+    env = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            print(f"--baseline-env {item!r}: expected KEY=VALUE", file=sys.stderr)
+            raise SystemExit(2)
+        env[key] = value
+    return env

@@ -24,7 +24,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import CheckoutWorker, machine, wrong_checkout  # noqa: E402
+from common import CheckoutWorker, machine, parse_env, wrong_checkout  # noqa: E402
 
 SMOKE = os.environ.get("GMA_BENCH_SMOKE") == "1"
 
@@ -57,8 +57,8 @@ class Worker(CheckoutWorker):
     """One checkout's GMA in a worker process (this script with ``--worker``): each request times a burst
     of steps there."""
 
-    def __init__(self, root: Path, avatar: Path, seq: Path):
-        super().__init__(root, __file__, str(avatar), str(seq))
+    def __init__(self, root: Path, avatar: Path, seq: Path, env: dict[str, str] | None = None):
+        super().__init__(root, __file__, str(avatar), str(seq), env=env)
 
     def time(self, kind: str, steps: int) -> float:
         return float(self.ask(f"{kind} {steps}"))
@@ -107,7 +107,7 @@ def worker(avatar_path: str, seq_path: str) -> int:
 
     pose_steps(2)  # compile the pipelines
     train_steps(2)
-    print("ready", flush=True)
+    print(f"ready {ctx.name}", flush=True)
     for line in sys.stdin:
         kind, k = line.split()
         time.sleep(0.3)  # let the other side's threads settle
@@ -136,6 +136,9 @@ def main() -> int:
         return worker(sys.argv[2], sys.argv[3])
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--baseline", type=Path, help="another GMA checkout to time beside this one")
+    ap.add_argument("--baseline-env", action="append", metavar="KEY=VALUE",
+                    help="KEY=VALUE for the baseline's worker only (repeatable); with --baseline . the "
+                         "same code on, e.g., the system's lavapipe: GMA_LAVAPIPE=system")
     ap.add_argument("--repeats", type=int, default=1 if SMOKE else 5, help="turns per side and step kind")
     ap.add_argument("--steps", type=int, default=1 if SMOKE else 8, help="steps per turn")
     ap.add_argument("--avatar", type=Path, help="a fitted avatar (with --sequence)")
@@ -163,7 +166,7 @@ def main() -> int:
             avatar, seq = args.avatar.resolve(), args.sequence.resolve()
         sides = {"this checkout": Worker(REPO, avatar, seq)}
         if args.baseline is not None:
-            sides["baseline"] = Worker(args.baseline, avatar, seq)
+            sides["baseline"] = Worker(args.baseline, avatar, seq, parse_env(args.baseline_env))
         times = {(name, kind): [] for name in sides for kind in ("pose", "train")}
         for r in range(args.repeats):
             order = list(sides.items()) if r % 2 == 0 else list(reversed(sides.items()))
@@ -172,6 +175,8 @@ def main() -> int:
                     times[name, kind].append(w.time(kind, args.steps))
         for w in sides.values():
             w.close()
+    for name, w in sides.items():
+        print(f"  {name}: {w.banner or 'adapter not reported'}")
     print(f"fit steps ({avatar.name}, {args.repeats} turns of {args.steps} steps per side; {machine()})")
     for (name, kind), v in times.items():
         label = "pose-fitting step" if kind == "pose" else "training step"

@@ -12,7 +12,8 @@ GMA frame started after 50-300 ms of idle, even with the calling thread kept bus
 back-to-back frames took 60 ms; the peer's 1.5 s steps hardly notice.) Prints medians and the ratios.
 ``--baseline DIR`` also times another GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a
 worker process, interleaved the same way, so that a speed-up over our own earlier code is a ratio from
-one run too.
+one run too; ``--baseline . --baseline-env GMA_LAVAPIPE=system`` times this same code on the system's
+lavapipe instead of the newer one kept in GMA's cache (the worker's adapter is printed).
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--burst 3] [--baseline DIR]
@@ -32,7 +33,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, CheckoutWorker, load_standard_workload, machine, wrong_checkout  # noqa: E402
+from common import SHARED_WORKLOAD, CheckoutWorker, load_standard_workload, machine, parse_env, wrong_checkout  # noqa: E402
 
 from gma.gpu import get_context  # noqa: E402
 from gma.render import rasterize  # noqa: E402
@@ -99,8 +100,8 @@ class Worker(CheckoutWorker):
     """A checkout's GMA in a worker process (this script with ``--worker``, its ``gma`` imported from that
     checkout): each request times one step there."""
 
-    def __init__(self, root: str | Path, n: int):
-        super().__init__(root, __file__, str(n))
+    def __init__(self, root: str | Path, n: int, env: dict[str, str] | None = None):
+        super().__init__(root, __file__, str(n), env=env)
 
     def steps(self, backward: bool, burst: int) -> list[float]:
         return [float(v) for v in self.ask(f"{'bwd' if backward else 'fwd'} {burst}").split()]
@@ -117,7 +118,7 @@ def worker(n: int) -> int:
     ctx = get_context()
     t = scene_tensors(workload, n)
     size = (workload.WIDTH, workload.HEIGHT)
-    print("ready", flush=True)
+    print(f"ready {ctx.name}", flush=True)
     for line in sys.stdin:
         kind, burst = line.split()
         times = timed_burst(int(burst), gma_step, t, kind == "bwd", ctx, size)
@@ -144,6 +145,9 @@ def main() -> int:
     ap.add_argument("--burst", type=int, default=3, help="steps per turn, back to back (>= 2)")
     ap.add_argument("--no-peer", action="store_true", help="time GMA only")
     ap.add_argument("--baseline", help="another GMA checkout to time beside this one (a worker process)")
+    ap.add_argument("--baseline-env", action="append", metavar="KEY=VALUE",
+                    help="KEY=VALUE for the baseline's worker only (repeatable); with --baseline . the "
+                         "same code on, e.g., the system's lavapipe: GMA_LAVAPIPE=system")
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     if args.burst < 2 or args.repeats < 1:
@@ -163,7 +167,10 @@ def main() -> int:
     for n in args.counts:
         t = scene_tensors(workload, n)
         ours = Worker(REPO, n)
-        base = Worker(args.baseline, n) if args.baseline else None
+        base = Worker(args.baseline, n, parse_env(args.baseline_env)) if args.baseline else None
+        if n == args.counts[0]:
+            print(f"this checkout's worker: {ours.banner}" + (f"; baseline's: {base.banner or 'not reported'}"
+                                                               if base else ""))
         for backward in (False, True):
             ours.steps(backward, 1)  # warm-up: pipelines, capacity
             if render:

@@ -2,7 +2,9 @@
 # Installs what GMA needs on a fresh Debian/Ubuntu machine, skipping what is already there.
 # - a Vulkan driver: Mesa's lavapipe (CPU) when no Vulkan ICD is present, xvfb for window tests;
 # - torch pinned first, so that the CPU wheel is used instead of the multi-GB CUDA build;
-# - this package in editable mode, with the SMPL-X, viewer (Dear ImGui), cluster (Ray, for gma batch) and dev extras.
+# - this package in editable mode, with the SMPL-X, viewer (Dear ImGui), cluster (Ray, for gma batch) and dev extras;
+# - on Debian 12, Mesa 25's lavapipe from bookworm-backports in GMA's cache (`gma lavapipe install`: checked
+#   against Debian's signed index, nothing on the system changes; GMA_LAVAPIPE=system skips it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -39,4 +41,9 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "[install] pip install -e .[smplx,viewer,cluster,dev]"
     "$PY" -m pip install -q -e ".[smplx,viewer,cluster,dev]"
     touch "$stamp"
+fi
+
+# Debian 12's own lavapipe (Mesa 22.3) renders markedly slower (docs/design.md); offline, the system's is used.
+if ! "$PY" -m gma.cli lavapipe install; then
+    echo "[install] keeping the system's lavapipe" >&2
 fi

@@ -2,6 +2,8 @@
 
 ``GMA_ADAPTER`` forces the choice: ``gpu`` (any hardware adapter), ``cpu`` (a software adapter such as
 lavapipe), or any other text, matched case-insensitively against the adapter's device/vendor name.
+Among software adapters the newest Mesa wins: on Debian 12 that is the lavapipe ``scripts/install.sh``
+keeps in GMA's cache (:mod:`gma.gpu.lavapipe`) rather than the system's older one.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import tempfile
 import wgpu
 
 from gma.core.errors import DeviceError
+from gma.gpu.lavapipe import mesa_version, register
 
 # Explicit graphics APIs beat the GL compatibility path, which lacks storage buffers in many places.
 _BACKEND_RANK = {"Vulkan": 0, "Metal": 0, "D3D12": 0, "DX12": 0, "OpenGL": 2, "GL": 2}
@@ -31,14 +34,19 @@ class NoAdapterError(DeviceError):
 
 def describe(adapter: wgpu.GPUAdapter) -> str:
     info = adapter.info
-    return f"{info.get('device', '?')} [{info.get('adapter_type', '?')}, {info.get('backend_type', '?')}]"
+    mesa = ".".join(map(str, mesa_version(str(info.get("description", "")))))
+    driver = f", Mesa {mesa}" if mesa and "Mesa" in str(info.get("description", "")) else ""
+    return f"{info.get('device', '?')} [{info.get('adapter_type', '?')}, {info.get('backend_type', '?')}{driver}]"
 
 
-def _rank(adapter: wgpu.GPUAdapter) -> tuple[int, int]:
+def _rank(adapter: wgpu.GPUAdapter) -> tuple:
     info = adapter.info
+    software = info.get("adapter_type") == "CPU"  # two lavapipes (system, cached): the newer Mesa
+    newer_first = tuple(-v for v in mesa_version(str(info.get("description", "")))) if software else ()
     return (
         _BACKEND_RANK.get(info.get("backend_type", ""), 1),
         _TYPE_RANK.get(info.get("adapter_type", "Unknown"), 3),
+        newer_first,
     )
 
 
@@ -70,6 +78,7 @@ def select_adapter(preference: str | None = None) -> wgpu.GPUAdapter:
     """Return the best adapter, honouring ``preference`` (default: ``$GMA_ADAPTER`` or ``auto``)."""
     wanted = (preference or os.environ.get("GMA_ADAPTER") or "auto").strip().lower()
     _runtime_dir()
+    register()  # the cached newer lavapipe, if any (before wgpu starts the Vulkan loader)
     adapters = list(wgpu.gpu.enumerate_adapters_sync())
     if wanted != "auto":
         adapters = [a for a in adapters if _matches(a, wanted)]

@@ -1,0 +1,262 @@
+"""A newer lavapipe for Debian 12, kept in GMA's cache instead of replacing the system's Mesa.
+
+Debian 12 ships Mesa 22.3; its backports carry Mesa 25, whose lavapipe runs the renderer's passes
+markedly faster on the same CPU (docs/design.md, "The lavapipe GMA runs on"). Getting it system-wide means
+adding an apt source and upgrading every Mesa Vulkan driver on the machine, so instead
+``gma lavapipe install`` (``scripts/install.sh`` runs it) fetches the backports package,
+checks it against Debian's signed archive index (gpgv and the Debian archive keyring, as apt would),
+and unpacks only the lavapipe library and its driver manifest into ``~/.cache/gma/lavapipe/<version>/``.
+The system's own lavapipe stays installed; it supplies the libraries the newer one links against and is
+the fallback. :func:`register` adds the cached manifest to the Vulkan loader's driver list
+(``VK_ADD_DRIVER_FILES``) before wgpu first starts, for this process and its children only, and the
+adapter choice prefers the newer Mesa among software adapters (:func:`mesa_version`).
+
+``GMA_LAVAPIPE=system`` (or an explicit ``VK_ICD_FILENAMES`` / ``VK_DRIVER_FILES``) leaves the loader
+alone. ``gma lavapipe status`` says what is cached and what wgpu picks.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import lzma
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tarfile
+import tempfile
+import urllib.request
+from pathlib import Path
+
+from gma.core.errors import DeviceError
+
+__all__ = ["cache_root", "cached_manifest", "install", "mesa_version", "register"]
+
+MIRROR = "http://deb.debian.org/debian"
+SUITE = "bookworm-backports"
+PACKAGE = "mesa-vulkan-drivers"
+KEYRING = Path("/usr/share/keyrings/debian-archive-keyring.gpg")
+# System lavapipes from this Mesa major on are left as they are (Debian 13, Ubuntu 24.04 and later).
+NEW_ENOUGH_MAJOR = 24
+LIBRARY = "libvulkan_lvp.so"
+MANIFEST = "lvp_icd.json"
+
+
+class LavapipeInstallError(DeviceError):
+    """Why the newer lavapipe was not installed (one line; the system's lavapipe stays in use)."""
+
+
+def cache_root() -> Path:
+    """``$GMA_LAVAPIPE_DIR``, else ``~/.cache/gma/lavapipe`` (beside anny's cache)."""
+    return Path(os.environ.get("GMA_LAVAPIPE_DIR") or Path.home() / ".cache" / "gma" / "lavapipe")
+
+
+def mesa_version(text: str) -> tuple[int, ...]:
+    """``(25, 0, 7)`` from an adapter description such as ``Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`` or a
+    Debian package version such as ``25.0.7-2~bpo12+1``; ``()`` when there is none."""
+    m = re.search(r"(?:Mesa\s+|^)(\d+)\.(\d+)(?:\.(\d+))?", text.strip())
+    return tuple(int(g) for g in m.groups() if g is not None) if m else ()
+
+
+def cached_manifest(root: Path | None = None) -> Path | None:
+    """The driver manifest of the newest complete lavapipe in the cache, or None."""
+    root = root or cache_root()
+    found = [p for p in root.glob(f"*/{MANIFEST}") if (p.parent / LIBRARY).is_file()] if root.is_dir() else []
+    return max(found, key=lambda p: mesa_version(p.parent.name), default=None)
+
+
+def register(environ=os.environ) -> Path | None:
+    """Add the cached lavapipe to the Vulkan loader's drivers (must run before wgpu's first adapter
+    enumeration in the process: the loader reads the variable when wgpu creates its instance)."""
+    added = [p for p in environ.get("VK_ADD_DRIVER_FILES", "").split(os.pathsep) if p]
+    if environ.get("GMA_LAVAPIPE", "").lower() == "system":
+        # (a child of a GMA process inherits the parent's registration: take the cached driver out again)
+        mine = [p for p in added if Path(p).resolve().is_relative_to(cache_root().resolve())]
+        if mine:
+            environ["VK_ADD_DRIVER_FILES"] = os.pathsep.join(p for p in added if p not in mine)
+        return None
+    if environ.get("VK_ICD_FILENAMES") or environ.get("VK_DRIVER_FILES"):
+        return None  # the user chose the drivers
+    manifest = cached_manifest()
+    if manifest is None:
+        return None
+    if str(manifest) not in added:
+        environ["VK_ADD_DRIVER_FILES"] = os.pathsep.join([*added, str(manifest)])
+    return manifest
+
+
+# -- install --------------------------------------------------------------------------------------------
+def _os_release() -> dict[str, str]:
+    try:
+        text = Path("/etc/os-release").read_text()
+    except OSError:
+        return {}
+    return dict(line.split("=", 1) for line in text.splitlines() if "=" in line and not line.startswith("#"))
+
+
+def _dpkg(*args: str) -> str:
+    return subprocess.run(["dpkg", *args], capture_output=True, text=True, check=False).stdout.strip()
+
+
+def _why_not_needed() -> str | None:
+    """None when this machine is one the newer lavapipe is for (Debian 12 with Mesa older than 24)."""
+    if os.environ.get("GMA_LAVAPIPE", "").lower() == "system":
+        return "GMA_LAVAPIPE=system"
+    codename = _os_release().get("VERSION_CODENAME", "").strip('"')
+    if codename != "bookworm":
+        return f"not Debian 12 ({codename or 'unknown system'}): its own Mesa is used"
+    if not shutil.which("dpkg"):
+        return "no dpkg"
+    system = _dpkg("-s", PACKAGE)
+    version = re.search(r"^Version:\s*(\S+)", system, re.M)
+    if version is None:
+        return f"{PACKAGE} is not installed (install it first: the newer lavapipe uses its libraries)"
+    if mesa_version(version.group(1))[:1] >= (NEW_ENOUGH_MAJOR,):
+        return f"the system's Mesa {version.group(1)} is new enough"
+    return None
+
+
+def _fetch(url: str, timeout: float = 60.0) -> bytes:
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:  # noqa: S310 (a fixed https/http mirror)
+            return r.read()
+    except OSError as e:
+        raise LavapipeInstallError(f"cannot download {url}: {e}") from None
+
+
+def verified_release(signed: bytes, keyring: Path = KEYRING) -> str:
+    """The text of a clearsigned ``InRelease`` file after gpgv has checked its signature against the
+    Debian archive keyring (what apt does); raises when it cannot be checked."""
+    if not shutil.which("gpgv") or not keyring.is_file():
+        raise LavapipeInstallError(f"gpgv or {keyring} missing: cannot check Debian's signature")
+    with tempfile.TemporaryDirectory() as tmp:
+        src, out = Path(tmp) / "InRelease", Path(tmp) / "Release"
+        src.write_bytes(signed)
+        r = subprocess.run(["gpgv", "--keyring", str(keyring), "--output", str(out), str(src)],
+                           capture_output=True, text=True, check=False)
+        if r.returncode != 0 or not out.is_file():
+            raise LavapipeInstallError(f"bad signature on {SUITE}'s InRelease: {r.stderr.strip().splitlines()[-1:]}")
+        return out.read_text()
+
+
+def release_sha256(release: str, path: str) -> tuple[str, int]:
+    """(sha256, size) that a Release file's SHA256 section lists for ``path``."""
+    section = release.split("\nSHA256:", 1)[-1] if "\nSHA256:" in release else ""
+    for line in section.splitlines()[1:]:
+        if not line.startswith(" "):
+            break
+        digest, size, name = line.split()
+        if name == path:
+            return digest, int(size)
+    raise LavapipeInstallError(f"{path} is not listed in {SUITE}'s Release file")
+
+
+def package_stanza(packages: str, name: str = PACKAGE) -> dict[str, str]:
+    """The newest stanza for ``name`` in a Packages index (fields as a dict)."""
+    best: dict[str, str] | None = None
+    for block in packages.split("\n\n"):
+        fields = dict(re.findall(r"^([A-Za-z0-9-]+):\s*(.*)$", block, re.M))
+        if fields.get("Package") == name and (best is None or mesa_version(fields.get("Version", ""))
+                                              > mesa_version(best.get("Version", ""))):
+            best = fields
+    if best is None or not {"Filename", "SHA256", "Version"} <= best.keys():
+        raise LavapipeInstallError(f"{name} is not in {SUITE}")
+    return best
+
+
+def _checked(data: bytes, digest: str, what: str) -> bytes:
+    if hashlib.sha256(data).hexdigest() != digest:
+        raise LavapipeInstallError(f"{what}: checksum does not match Debian's index")
+    return data
+
+
+def deb_members(deb: bytes) -> dict[str, bytes]:
+    """The members of a .deb (an ``ar`` archive): name -> bytes."""
+    if not deb.startswith(b"!<arch>\n"):
+        raise LavapipeInstallError("not a .deb (ar) archive")
+    members, pos = {}, 8
+    while pos + 60 <= len(deb):
+        header = deb[pos:pos + 60]
+        name, size = header[:16].decode().strip().rstrip("/"), int(header[48:58].decode().strip())
+        members[name] = deb[pos + 60:pos + 60 + size]
+        pos += 60 + size + (size & 1)  # members are 2-byte aligned
+    return members
+
+
+def lavapipe_files(deb: bytes) -> tuple[bytes, bytes]:
+    """(the lavapipe library, its driver manifest) from a mesa-vulkan-drivers .deb."""
+    members = deb_members(deb)
+    data = next((members[n] for n in ("data.tar.xz", "data.tar.gz") if n in members), None)
+    if data is None:
+        raise LavapipeInstallError(f"the package holds none of data.tar.xz/gz ({sorted(members)})")
+    library = manifest = None
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        for info in tar:
+            base = Path(info.name).name
+            if info.isfile() and base == LIBRARY:
+                library = tar.extractfile(info).read()
+            elif info.isfile() and re.fullmatch(r"lvp_icd(\.[a-z0-9_]+)?\.json", base):
+                manifest = tar.extractfile(info).read()
+    if library is None or manifest is None:
+        raise LavapipeInstallError("the package holds no lavapipe library or manifest")
+    return library, manifest
+
+
+def _works(manifest: Path, version: str) -> str | None:
+    """Start wgpu in a child process with only this driver; its adapter description, or None."""
+    env = {**os.environ, "VK_ICD_FILENAMES": str(manifest), "GMA_LAVAPIPE": "system"}
+    code = ("import wgpu; a = [a.info['description'] for a in wgpu.gpu.enumerate_adapters_sync() "
+            "if a.info['backend_type'] == 'Vulkan']; print(a[0] if a else '')")
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
+                       check=False)
+    described = r.stdout.strip().splitlines()[-1:] if r.returncode == 0 else []
+    return described[0] if described and mesa_version(described[0])[:2] == mesa_version(version)[:2] else None
+
+
+def install(root: Path | None = None, force: bool = False, update: bool = False) -> Path | None:
+    """Fetch, check and unpack the newer lavapipe; return its manifest (None when not needed here).
+    With one already cached nothing is fetched unless ``update`` (then a newer backport is added)."""
+    root = root or cache_root()
+    if not force and (reason := _why_not_needed()):
+        print(f"[lavapipe] system lavapipe kept: {reason}")
+        return None
+    if not update and (cached := cached_manifest(root)) is not None:
+        return cached  # every `make test` runs this: no network once one is cached
+    arch = _dpkg("--print-architecture") or "amd64"
+    release = verified_release(_fetch(f"{MIRROR}/dists/{SUITE}/InRelease"))
+    index = f"main/binary-{arch}/Packages.xz"
+    digest, _ = release_sha256(release, index)
+    packages = lzma.decompress(_checked(_fetch(f"{MIRROR}/dists/{SUITE}/{index}"), digest, index)).decode()
+    stanza = package_stanza(packages)
+    version = stanza["Version"]
+    target = root / version.replace("~", "_").replace("+", "_")
+    if (target / MANIFEST).is_file() and (target / LIBRARY).is_file():
+        print(f"[lavapipe] Mesa {version} already in {target}")
+        return target / MANIFEST
+    print(f"[lavapipe] fetching Mesa {version}'s lavapipe from {SUITE} ({int(stanza.get('Size', 0)) >> 20} MB)")
+    deb = _checked(_fetch(f"{MIRROR}/{stanza['Filename']}", timeout=300), stanza["SHA256"], stanza["Filename"])
+    library, manifest_text = lavapipe_files(deb)
+    root.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".partial-", dir=root))
+    try:
+        (tmp / LIBRARY).write_bytes(library)
+        spec = json.loads(manifest_text)
+        spec["ICD"]["library_path"] = str(target / LIBRARY)  # absolute: the loader needs no search path
+        (tmp / MANIFEST).write_text(json.dumps(spec, indent=2))
+        (tmp / "source.json").write_text(json.dumps(
+            {"package": PACKAGE, "version": version, "url": f"{MIRROR}/{stanza['Filename']}",
+             "sha256": stanza["SHA256"]}, indent=2))
+        shutil.rmtree(target, ignore_errors=True)
+        tmp.rename(target)  # complete or absent: cached_manifest never sees half a driver
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    described = _works(target / MANIFEST, version)
+    if described is None:
+        shutil.rmtree(target, ignore_errors=True)
+        raise LavapipeInstallError(f"Mesa {version}'s lavapipe did not start here; the system's stays in use")
+    print(f"[lavapipe] installed {described} in {target}")
+    return target / MANIFEST

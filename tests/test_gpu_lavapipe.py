@@ -1,0 +1,194 @@
+"""The newer lavapipe kept in GMA's cache (gma.gpu.lavapipe): parsing Debian's index and the .deb,
+checking every download against the index, installing completely or not at all, registering with the
+Vulkan loader only where the user has not chosen drivers, and the adapter choice preferring the newer
+Mesa. Offline: downloads are served from memory (scripts/install.sh does the real fetch)."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import lzma
+import shutil
+import tarfile
+from types import SimpleNamespace
+
+import pytest
+
+from gma.gpu import adapter as adapter_mod
+from gma.gpu import lavapipe
+from gma.gpu.lavapipe import LavapipeInstallError
+
+
+def _tar_xz(files: dict[str, bytes]) -> bytes:
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:xz") as tar:
+        for name, data in files.items():
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+    return buf.getvalue()
+
+
+def _ar(members: dict[str, bytes]) -> bytes:
+    out = bytearray(b"!<arch>\n")
+    for name, data in members.items():
+        out += f"{name + '/':<16}{0:<12}{0:<6}{0:<6}{100644:<8}{len(data):<10}`\n".encode()
+        out += data + (b"\n" if len(data) % 2 else b"")  # odd sizes are padded to 2 bytes
+    return bytes(out)
+
+
+LIB = b"\x7fELF fake lavapipe" * 7  # odd length: exercises the ar padding
+ICD = json.dumps({"file_format_version": "1.0.0", "ICD": {"library_path": "libvulkan_lvp.so",
+                                                          "api_version": "1.4.305"}}).encode()
+
+
+def _deb() -> bytes:
+    data = _tar_xz({"./usr/lib/x86_64-linux-gnu/libvulkan_lvp.so": LIB,
+                    "./usr/lib/x86_64-linux-gnu/libvulkan_radeon.so": b"other driver",
+                    "./usr/share/vulkan/icd.d/lvp_icd.json": ICD,
+                    "./usr/share/vulkan/icd.d/radeon_icd.json": b"{}"})
+    return _ar({"debian-binary": b"2.0\n", "control.tar.xz": _tar_xz({"./control": b"Package: x\n"}),
+                "data.tar.xz": data})
+
+
+def _packages(deb: bytes) -> str:
+    return ("Package: libvulkan1\nVersion: 1.3.0\nFilename: pool/x.deb\nSHA256: 00\n\n"
+            "Package: mesa-vulkan-drivers\nVersion: 24.2.8-1~bpo12+1\nFilename: pool/old.deb\nSHA256: 00\n\n"
+            f"Package: mesa-vulkan-drivers\nVersion: 25.0.7-2~bpo12+1\nSize: {len(deb)}\n"
+            f"Filename: pool/main/m/mesa/new.deb\nSHA256: {hashlib.sha256(deb).hexdigest()}\n")
+
+
+def _release(packages_xz: bytes) -> str:
+    return ("Origin: Debian Backports\nSuite: bookworm-backports\nMD5Sum:\n 00 1 main/binary-amd64/Packages.xz\n"
+            f"SHA256:\n 11 5 main/binary-arm64/Packages.xz\n {hashlib.sha256(packages_xz).hexdigest()} "
+            f"{len(packages_xz)} main/binary-amd64/Packages.xz\n")
+
+
+def test_mesa_version_from_adapters_and_packages():
+    assert lavapipe.mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)") == (25, 0, 7)
+    assert lavapipe.mesa_version("Mesa 22.3.6 (LLVM 15.0.6)") == (22, 3, 6)
+    assert lavapipe.mesa_version("25.0.7-2~bpo12+1") == (25, 0, 7)
+    assert lavapipe.mesa_version("25.0.7-2_bpo12_1") == (25, 0, 7)  # the cache folder's name
+    assert lavapipe.mesa_version("NVIDIA driver") == ()
+
+
+def test_index_parsing_picks_the_newest_package_and_its_checksum():
+    deb = _deb()
+    stanza = lavapipe.package_stanza(_packages(deb))
+    assert stanza["Version"] == "25.0.7-2~bpo12+1" and stanza["Filename"].endswith("new.deb")
+    with pytest.raises(LavapipeInstallError, match="not in"):
+        lavapipe.package_stanza("Package: other\nVersion: 1\n")
+    xz = lzma.compress(_packages(deb).encode())
+    assert lavapipe.release_sha256(_release(xz), "main/binary-amd64/Packages.xz") == \
+        (hashlib.sha256(xz).hexdigest(), len(xz))
+    with pytest.raises(LavapipeInstallError, match="not listed"):
+        lavapipe.release_sha256(_release(xz), "main/binary-riscv64/Packages.xz")
+
+
+def test_deb_unpacking_takes_only_lavapipe():
+    library, manifest = lavapipe.lavapipe_files(_deb())
+    assert library == LIB and json.loads(manifest)["ICD"]["library_path"] == "libvulkan_lvp.so"
+    with pytest.raises(LavapipeInstallError, match="not a .deb"):
+        lavapipe.lavapipe_files(b"PK\x03\x04 a zip")
+    with pytest.raises(LavapipeInstallError, match="no lavapipe"):
+        lavapipe.lavapipe_files(_ar({"data.tar.xz": _tar_xz({"./usr/share/doc/x": b"x"})}))
+
+
+@pytest.mark.skipif(not shutil.which("gpgv") or not lavapipe.KEYRING.is_file(),
+                    reason="needs gpgv and Debian's keyring")
+def test_an_unsigned_release_is_refused():
+    forged = b"-----BEGIN PGP SIGNED MESSAGE-----\nHash: SHA256\n\nSHA256:\n 00 1 x\n" \
+             b"-----BEGIN PGP SIGNATURE-----\n\niQIzBAEBCAAdFiEE\n-----END PGP SIGNATURE-----\n"
+    with pytest.raises(LavapipeInstallError, match="signature"):
+        lavapipe.verified_release(forged)
+
+
+@pytest.fixture
+def served(monkeypatch, tmp_path):
+    """install() against an in-memory mirror; returns the files it serves (tests may corrupt them)."""
+    deb = _deb()
+    xz = lzma.compress(_packages(deb).encode())
+    dists = "dists/bookworm-backports"
+    files = {f"{dists}/InRelease": b"signed", f"{dists}/main/binary-amd64/Packages.xz": xz,
+             "pool/main/m/mesa/new.deb": deb}
+    monkeypatch.setattr(lavapipe, "_fetch", lambda url, timeout=60.0: files[url.removeprefix(lavapipe.MIRROR + "/")])
+    monkeypatch.setattr(lavapipe, "verified_release", lambda signed: _release(xz))
+    monkeypatch.setattr(lavapipe, "_dpkg", lambda *a: "amd64")
+    monkeypatch.setattr(lavapipe, "_works", lambda manifest, version: f"Mesa {version} (LLVM 15.0.6)")
+    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(tmp_path / "cache"))
+    return files
+
+
+def test_install_unpacks_a_complete_driver_with_an_absolute_library_path(served, tmp_path):
+    manifest = lavapipe.install(force=True)
+    folder = tmp_path / "cache" / "25.0.7-2_bpo12_1"
+    assert manifest == folder / "lvp_icd.json"
+    assert (folder / "libvulkan_lvp.so").read_bytes() == LIB
+    assert json.loads(manifest.read_text())["ICD"]["library_path"] == str(folder / "libvulkan_lvp.so")
+    assert json.loads((folder / "source.json").read_text())["version"] == "25.0.7-2~bpo12+1"
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir()) == [folder.name]  # no partial folder left
+    assert lavapipe.cached_manifest() == manifest
+    del served["pool/main/m/mesa/new.deb"]  # a second run fetches nothing
+    assert lavapipe.install(force=True) == manifest
+    assert lavapipe.install(force=True, update=True) == manifest  # the index has nothing newer
+
+
+def test_install_refuses_a_download_that_does_not_match_the_index(served, tmp_path):
+    served["pool/main/m/mesa/new.deb"] = served["pool/main/m/mesa/new.deb"][:-1] + b"X"
+    with pytest.raises(LavapipeInstallError, match="checksum"):
+        lavapipe.install(force=True)
+    assert lavapipe.cached_manifest() is None
+
+
+def test_a_driver_that_does_not_start_is_removed(served, monkeypatch, tmp_path):
+    monkeypatch.setattr(lavapipe, "_works", lambda manifest, version: None)
+    with pytest.raises(LavapipeInstallError, match="did not start"):
+        lavapipe.install(force=True)
+    assert list((tmp_path / "cache").iterdir()) == []
+
+
+def test_install_keeps_the_system_driver_where_it_is_not_needed(monkeypatch, capsys):
+    monkeypatch.setenv("GMA_LAVAPIPE", "system")
+    assert lavapipe.install() is None
+    assert "system lavapipe kept: GMA_LAVAPIPE=system" in capsys.readouterr().out
+
+
+def _cache_with(tmp_path, *versions, complete=True):
+    for v in versions:
+        d = tmp_path / v
+        d.mkdir(parents=True)
+        (d / "lvp_icd.json").write_text("{}")
+        if complete:
+            (d / "libvulkan_lvp.so").write_bytes(b"x")
+    return tmp_path
+
+
+def test_register_adds_the_newest_cached_driver_unless_the_user_chose(monkeypatch, tmp_path):
+    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(_cache_with(tmp_path, "24.2.8-1", "25.0.7-2_bpo12_1")))
+    env = {"VK_ADD_DRIVER_FILES": "/opt/other.json"}
+    manifest = lavapipe.register(env)
+    assert manifest == tmp_path / "25.0.7-2_bpo12_1" / "lvp_icd.json"
+    assert env["VK_ADD_DRIVER_FILES"].split(":") == ["/opt/other.json", str(manifest)]
+    lavapipe.register(env)  # idempotent
+    assert env["VK_ADD_DRIVER_FILES"].count(str(manifest)) == 1
+    for chosen in ({"GMA_LAVAPIPE": "system"}, {"VK_ICD_FILENAMES": "/x.json"}, {"VK_DRIVER_FILES": "/x.json"}):
+        assert lavapipe.register(dict(chosen)) is None
+    child = {**env, "GMA_LAVAPIPE": "system"}  # a child asking for the system's driver drops the inherited one
+    assert lavapipe.register(child) is None and child["VK_ADD_DRIVER_FILES"] == "/opt/other.json"
+
+
+def test_an_incomplete_cache_folder_is_ignored(monkeypatch, tmp_path):
+    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(_cache_with(tmp_path, "25.0.7-2", complete=False)))
+    assert lavapipe.register({}) is None
+
+
+def test_adapter_choice_prefers_hardware_then_the_newer_mesa():
+    def fake(kind, description, backend="Vulkan"):
+        return SimpleNamespace(info={"adapter_type": kind, "backend_type": backend, "description": description})
+
+    old, new = fake("CPU", "Mesa 22.3.6 (LLVM 15.0.6)"), fake("CPU", "Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)")
+    gl = fake("CPU", "4.5 (Core Profile) Mesa 25.0.7", backend="OpenGL")
+    gpu = fake("DiscreteGPU", "NVIDIA 560.35.03")
+    assert min([old, gl, new], key=adapter_mod._rank) is new
+    assert min([old, new, gpu], key=adapter_mod._rank) is gpu
