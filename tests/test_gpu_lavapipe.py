@@ -86,6 +86,15 @@ def test_index_parsing_picks_the_newest_package_and_its_checksum():
         lavapipe.release_sha256(_release(xz), "main/binary-riscv64/Packages.xz")
 
 
+def test_an_expired_release_is_refused():
+    from datetime import datetime, timezone
+
+    release = "Suite: bookworm-backports\nValid-Until: Fri, 04 Dec 2026 02:10:32 UTC\n"
+    lavapipe.check_fresh(release, datetime(2026, 12, 1, tzinfo=timezone.utc))
+    with pytest.raises(LavapipeInstallError, match="expired"):
+        lavapipe.check_fresh(release, datetime(2026, 12, 5, tzinfo=timezone.utc))
+
+
 def test_deb_unpacking_takes_only_lavapipe():
     library, manifest = lavapipe.lavapipe_files(_deb())
     assert library == LIB and json.loads(manifest)["ICD"]["library_path"] == "libvulkan_lvp.so"

@@ -29,6 +29,8 @@ import sys
 import tarfile
 import tempfile
 import urllib.request
+from datetime import datetime, timezone
+from email.utils import parsedate_to_datetime
 from pathlib import Path
 
 from gma.core.errors import DeviceError
@@ -142,6 +144,17 @@ def verified_release(signed: bytes, keyring: Path = KEYRING) -> str:
         return out.read_text()
 
 
+def check_fresh(release: str, now: datetime | None = None) -> None:
+    """Refuse a Release file past its ``Valid-Until`` (an old, once-signed index replayed by a mirror or
+    a proxy would otherwise pass the signature check; apt refuses it too)."""
+    field = re.search(r"^Valid-Until:\s*(.+)$", release, re.M)
+    if field is None:
+        return
+    until = parsedate_to_datetime(field.group(1).strip())
+    if (now or datetime.now(timezone.utc)) > until:
+        raise LavapipeInstallError(f"{SUITE}'s Release file expired on {field.group(1).strip()} (a stale mirror?)")
+
+
 def release_sha256(release: str, path: str) -> tuple[str, int]:
     """(sha256, size) that a Release file's SHA256 section lists for ``path``."""
     section = release.split("\nSHA256:", 1)[-1] if "\nSHA256:" in release else ""
@@ -227,6 +240,7 @@ def install(root: Path | None = None, force: bool = False, update: bool = False)
         return cached  # every `make test` runs this: no network once one is cached
     arch = _dpkg("--print-architecture") or "amd64"
     release = verified_release(_fetch(f"{MIRROR}/dists/{SUITE}/InRelease"))
+    check_fresh(release)
     index = f"main/binary-{arch}/Packages.xz"
     digest, _ = release_sha256(release, index)
     packages = lzma.decompress(_checked(_fetch(f"{MIRROR}/dists/{SUITE}/{index}"), digest, index)).decode()
@@ -250,10 +264,13 @@ def install(root: Path | None = None, force: bool = False, update: bool = False)
             {"package": PACKAGE, "version": version, "url": f"{MIRROR}/{stanza['Filename']}",
              "sha256": stanza["SHA256"]}, indent=2))
         shutil.rmtree(target, ignore_errors=True)
-        tmp.rename(target)  # complete or absent: cached_manifest never sees half a driver
-    except BaseException:
+        try:
+            tmp.rename(target)  # complete or absent: cached_manifest never sees half a driver
+        except OSError:
+            if not (target / LIBRARY).is_file():  # (else another install, e.g. a second `make`, won the race)
+                raise
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
     described = _works(target / MANIFEST, version)
     if described is None:
         shutil.rmtree(target, ignore_errors=True)
