@@ -68,9 +68,11 @@ def _release(packages_xz: bytes) -> str:
 def test_mesa_version_from_adapters_and_packages():
     assert lavapipe.mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)") == (25, 0, 7)
     assert lavapipe.mesa_version("Mesa 22.3.6 (LLVM 15.0.6)") == (22, 3, 6)
-    assert lavapipe.mesa_version("25.0.7-2~bpo12+1") == (25, 0, 7)
-    assert lavapipe.mesa_version("25.0.7-2_bpo12_1") == (25, 0, 7)  # the cache folder's name
+    assert lavapipe.mesa_version("4.5 (Core Profile) Mesa 25.0.7") == (25, 0, 7)  # not the GL version
+    assert lavapipe.package_version("25.0.7-2~bpo12+1") == (25, 0, 7)
+    assert lavapipe.package_version("25.0.7-2_bpo12_1") == (25, 0, 7)  # the cache folder's name
     assert lavapipe.mesa_version("NVIDIA driver") == ()
+    assert lavapipe.mesa_version("560.35.03") == ()  # a version, but not Mesa's
 
 
 def test_index_parsing_picks_the_newest_package_and_its_checksum():

@@ -224,9 +224,9 @@ def _to_uint8(a: np.ndarray, name: str) -> np.ndarray:
     raise ValueError(f"{name} has dtype {a.dtype}; expected uint8 or float in [0, 1]")
 
 
-# What a sequence folder written by GMA holds (the format's files and what synth / the video import add).
 # What every sequence folder holds (the rest of SEQUENCE_ENTRIES is optional).
 REQUIRED_ENTRIES = ("cameras.json", "body.npz", "images")
+# What a sequence folder written by GMA holds (the format's files and what synth / the video import add).
 SEQUENCE_ENTRIES = {"images", "masks", "cameras.json", "body.npz", "splits.json", "gt_mesh.npz", "gt_texture.png",
                     "synth.json", "video_report.json", "video_contact_sheet.png"}
 

@@ -35,7 +35,7 @@ class NoAdapterError(DeviceError):
 def describe(adapter: wgpu.GPUAdapter) -> str:
     info = adapter.info
     mesa = ".".join(map(str, mesa_version(str(info.get("description", "")))))
-    driver = f", Mesa {mesa}" if mesa and "Mesa" in str(info.get("description", "")) else ""
+    driver = f", Mesa {mesa}" if mesa else ""
     return f"{info.get('device', '?')} [{info.get('adapter_type', '?')}, {info.get('backend_type', '?')}{driver}]"
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 
 from gma.core.errors import DeviceError
 
-__all__ = ["cache_root", "cached_manifest", "install", "mesa_version", "register"]
+__all__ = ["cache_root", "cached_manifest", "install", "mesa_version", "package_version", "register"]
 
 MIRROR = "http://deb.debian.org/debian"
 SUITE = "bookworm-backports"
@@ -56,25 +56,37 @@ def cache_root() -> Path:
     return Path(os.environ.get("GMA_LAVAPIPE_DIR") or Path.home() / ".cache" / "gma" / "lavapipe")
 
 
-def mesa_version(text: str) -> tuple[int, ...]:
-    """``(25, 0, 7)`` from an adapter description such as ``Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`` or a
-    Debian package version such as ``25.0.7-2~bpo12+1``; ``()`` when there is none."""
-    m = re.search(r"(?:Mesa\s+|^)(\d+)\.(\d+)(?:\.(\d+))?", text.strip())
-    return tuple(int(g) for g in m.groups() if g is not None) if m else ()
+def _numbers(match: re.Match | None) -> tuple[int, ...]:
+    return tuple(int(g) for g in match.groups() if g is not None) if match else ()
+
+
+def mesa_version(description: str) -> tuple[int, ...]:
+    """``(25, 0, 7)`` from an adapter description such as ``Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`` (also
+    the GL adapter's ``4.5 (Core Profile) Mesa 25.0.7``); ``()`` for a driver that is not Mesa."""
+    return _numbers(re.search(r"Mesa\s+(\d+)\.(\d+)(?:\.(\d+))?", description))
+
+
+def package_version(version: str) -> tuple[int, ...]:
+    """``(25, 0, 7)`` from a Debian package version such as ``25.0.7-2~bpo12+1`` (or a cache folder's name)."""
+    return _numbers(re.match(r"\s*(\d+)\.(\d+)(?:\.(\d+))?", version))
+
+
+def _system_chosen(environ=os.environ) -> bool:
+    return environ.get("GMA_LAVAPIPE", "").lower() == "system"
 
 
 def cached_manifest(root: Path | None = None) -> Path | None:
     """The driver manifest of the newest complete lavapipe in the cache, or None."""
     root = root or cache_root()
     found = [p for p in root.glob(f"*/{MANIFEST}") if (p.parent / LIBRARY).is_file()] if root.is_dir() else []
-    return max(found, key=lambda p: mesa_version(p.parent.name), default=None)
+    return max(found, key=lambda p: package_version(p.parent.name), default=None)
 
 
 def register(environ=os.environ) -> Path | None:
     """Add the cached lavapipe to the Vulkan loader's drivers (must run before wgpu's first adapter
     enumeration in the process: the loader reads the variable when wgpu creates its instance)."""
     added = [p for p in environ.get("VK_ADD_DRIVER_FILES", "").split(os.pathsep) if p]
-    if environ.get("GMA_LAVAPIPE", "").lower() == "system":
+    if _system_chosen(environ):
         # (a child of a GMA process inherits the parent's registration: take the cached driver out again)
         mine = [p for p in added if Path(p).resolve().is_relative_to(cache_root().resolve())]
         if mine:
@@ -105,7 +117,7 @@ def _dpkg(*args: str) -> str:
 
 def _why_not_needed() -> str | None:
     """None when this machine is one the newer lavapipe is for (Debian 12 with Mesa older than 24)."""
-    if os.environ.get("GMA_LAVAPIPE", "").lower() == "system":
+    if _system_chosen():
         return "GMA_LAVAPIPE=system"
     codename = _os_release().get("VERSION_CODENAME", "").strip('"')
     if codename != "bookworm":
@@ -116,7 +128,7 @@ def _why_not_needed() -> str | None:
     version = re.search(r"^Version:\s*(\S+)", system, re.M)
     if version is None:
         return f"{PACKAGE} is not installed (install it first: the newer lavapipe uses its libraries)"
-    if mesa_version(version.group(1))[:1] >= (NEW_ENOUGH_MAJOR,):
+    if package_version(version.group(1))[:1] >= (NEW_ENOUGH_MAJOR,):
         return f"the system's Mesa {version.group(1)} is new enough"
     return None
 
@@ -172,8 +184,8 @@ def package_stanza(packages: str, name: str = PACKAGE) -> dict[str, str]:
     best: dict[str, str] | None = None
     for block in packages.split("\n\n"):
         fields = dict(re.findall(r"^([A-Za-z0-9-]+):\s*(.*)$", block, re.M))
-        if fields.get("Package") == name and (best is None or mesa_version(fields.get("Version", ""))
-                                              > mesa_version(best.get("Version", ""))):
+        if fields.get("Package") == name and (best is None or package_version(fields.get("Version", ""))
+                                              > package_version(best.get("Version", ""))):
             best = fields
     if best is None or not {"Filename", "SHA256", "Version"} <= best.keys():
         raise LavapipeInstallError(f"{name} is not in {SUITE}")
@@ -226,7 +238,7 @@ def _works(manifest: Path, version: str) -> str | None:
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
                        check=False)
     described = r.stdout.strip().splitlines()[-1:] if r.returncode == 0 else []
-    return described[0] if described and mesa_version(described[0])[:2] == mesa_version(version)[:2] else None
+    return described[0] if described and mesa_version(described[0])[:2] == package_version(version)[:2] else None
 
 
 def install(root: Path | None = None, force: bool = False, update: bool = False) -> Path | None:
