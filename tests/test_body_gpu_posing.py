@@ -154,10 +154,15 @@ def test_anny_walk_frame_wgsl_matches_torch(gpu, anny_body):
     np.testing.assert_allclose(poser.read_posed_vertices(), posed.numpy(), atol=ATOL, rtol=0)
     means, quats, scales = place_surfels(posed, b.faces, binding)
     gm, gq, gs = poser.read_surfels(*outs)
-    np.testing.assert_allclose(gm, means.numpy(), atol=ATOL, rtol=0)
     # Anny's smallest faces (eyes, mouth interior) have edges of ~1 mm: their frames and sqrt(area) are
     # more sensitive to the ulp-level differences of the skinned vertices (measured worst quaternion
-    # difference 2.5e-4), hence looser tolerances here than on the random meshes.
+    # difference 2.5e-4), hence looser tolerances here than on the random meshes. A mean sits `offset`
+    # along its face's normal, so it inherits that frame error times |offset| (seen: 2.17e-5 off on a
+    # sliver face with a 0.8 mm edge and offset 0.021, on one machine, where ATOL alone allows 2e-5).
+    mean_tol = ATOL + 1e-3 * binding.offset.abs().numpy()[:, None]
+    worst = np.abs(gm - means.numpy()) - mean_tol
+    where = np.unravel_index(worst.argmax(), worst.shape)
+    assert worst.max() <= 0, f"surfel mean {where} off by {worst.max():.3g} beyond its tolerance"
     np.testing.assert_allclose(gs, scales.numpy(), atol=ATOL, rtol=1e-3)
     quat_close(gq / np.linalg.norm(gq, axis=1, keepdims=True),
                (quats / quats.norm(dim=1, keepdim=True)).numpy(), 1e-3)
