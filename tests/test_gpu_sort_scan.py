@@ -13,10 +13,11 @@ pytestmark = pytest.mark.gpu
 
 @pytest.mark.parametrize("n", [1, 7, 2047, 2048, 2049, 50_000])
 @pytest.mark.parametrize("bits,high", [(32, 2**32), (10, 1000), (4, 3)])
-def test_radix_sort_equals_stable_argsort(gpu, n, bits, high):
+@pytest.mark.parametrize("threads", [16, 128])  # the CPU drivers' and the GPUs' block geometry (gpu_sort.py)
+def test_radix_sort_equals_stable_argsort(gpu, n, bits, high, threads):
     rng = np.random.default_rng(n + bits)
     keys = rng.integers(0, high, n, dtype=np.uint64).astype(np.uint32)  # many duplicates when high small
-    sorted_keys, order = RadixSorter(gpu).sort(keys, bits=bits)
+    sorted_keys, order = RadixSorter(gpu, threads=threads).sort(keys, bits=bits)
     want = np.argsort(keys, kind="stable")
     np.testing.assert_array_equal(order, want)
     np.testing.assert_array_equal(sorted_keys, keys[want])
@@ -32,6 +33,15 @@ def test_radix_sort_from_a_base_orders_the_keys_above_it(gpu, n):
     keys[:2] = [base, base + (1 << 18) - 1]
     sorted_keys, order = RadixSorter(gpu).sort(keys, bits=18, base=base)
     np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+
+
+def test_radix_sort_block_geometry(gpu):
+    from gma.render.gpu_sort import CPU_SORT_THREADS, GPU_SORT_THREADS
+
+    assert RadixSorter(gpu).threads == (CPU_SORT_THREADS if gpu.is_software else GPU_SORT_THREADS)
+    for bad in (8, 24, 4096):  # fewer threads than digits, not a divisor of the block, no keys per thread
+        with pytest.raises(ValueError, match="sort threads per block"):
+            RadixSorter(gpu, threads=bad)
 
 
 def test_depth_key_bits():

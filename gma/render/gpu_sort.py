@@ -10,6 +10,10 @@ from gma.gpu.workspace import Workspace
 
 SORT_BLOCK = 2048  # keys per workgroup; mirrors shaders/wgsl/common/sort_types.wgsl
 RADIX_BITS = 4  # digit width; mirrors shaders/wgsl/sort/radix_digits.wgsl (whose counters are packed for 4 bits)
+# Threads per block (SORT_WG in sort/radix_digits.wgsl, which says why): many threads with few keys each on
+# GPUs, few threads with many keys each on CPU drivers. At least 1 << RADIX_BITS; at most 255 keys a thread.
+GPU_SORT_THREADS = 128
+CPU_SORT_THREADS = 16
 
 
 def sort_blocks(count: int) -> int:
@@ -29,9 +33,13 @@ class RadixSorter:
     are then indirect. ``capacity`` bounds the count and sizes the scratch buffers.
     """
 
-    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None):
+    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None, threads: int | None = None):
         self.ctx = ctx
         self.workspace = workspace or Workspace(ctx)
+        self.threads = threads or (CPU_SORT_THREADS if ctx.is_software else GPU_SORT_THREADS)
+        if self.threads < (1 << RADIX_BITS) or SORT_BLOCK % self.threads or SORT_BLOCK // self.threads > 255:
+            raise ValueError(f"{self.threads} sort threads per block: need a divisor of {SORT_BLOCK} with at "
+                             f"least {1 << RADIX_BITS} threads and at most 255 keys each")
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,
@@ -42,6 +50,7 @@ class RadixSorter:
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
         based = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
+        based["SORT_WG"] = self.threads
         extra = [base[0]] if base else []
         hist = self.workspace.get("sort.hist", (4 << RADIX_BITS) * sort_blocks(capacity))
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
@@ -49,7 +58,7 @@ class RadixSorter:
         src, dst = (keys, values), (keys_tmp, vals_tmp)
         count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i, **based})
                    for i in range(passes)]
-        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0})
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0, "SORT_WG": self.threads})
         scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i, **based})
                      for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])

@@ -17,7 +17,7 @@
 @group(0) @binding(6) var<storage, read> key_base: array<u32>;   // see key_offset
 #endif
 
-var<workgroup> offsets: array<u32, 2048>;   // [RADIX][SORT_WG]: per digit, per thread
+var<workgroup> offsets: array<u32, RADIX * SORT_WG>;   // [RADIX][SORT_WG]: per digit, per thread
 
 // This thread's first output positions for digits 4w .. 4w + 3 (read into registers once, so that each
 // key picks its digit's by selects).
