@@ -144,3 +144,43 @@ def test_projection_stats_variants_agree(gpu):
         assert stats[1] == counts.sum() == st.num_isects
         results.append(stats[1:])
     np.testing.assert_array_equal(results[0], results[1])
+
+
+@pytest.mark.parametrize("subgroups", [False, True])
+def test_render_only_forward_matches_the_replayable_one(gpu, subgroups):
+    """replay=False (what a render no gradient comes back to uses) gives bit-identical images from
+    scratch buffers, for both rasterizer variants, and its state refuses a backward pass."""
+    from gma.render import read_outputs
+
+    if subgroups and not gpu.has_subgroups:
+        pytest.skip("adapter has no subgroups")
+    scene = torch_scene(2000, seed=5)
+    cam = default_camera(80, 64)
+    rast = SurfelRasterizer(gpu)
+    rast.use_subgroups = subgroups and rast.use_subgroups
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in ("means", "quats", "scales", "opacities",
+                                                                           "colors")))
+    kept = read_outputs(gpu, rast.forward(buffers, cam, np.array([0.2, 0.3, 0.4], np.float32)))
+    state = rast.forward(buffers, cam, np.array([0.2, 0.3, 0.4], np.float32), replay=False)
+    assert state.final_t is None and state.last is None
+    only = read_outputs(gpu, state)
+    for name in ("color", "alpha", "normal", "depth"):
+        np.testing.assert_array_equal(getattr(only, name), getattr(kept, name))
+    with pytest.raises(ValueError, match="replay=False"):
+        rast.backward(state, buffers, np.zeros((cam.height, cam.width, 3), np.float32), None, None, None)
+
+
+def test_public_render_without_gradients_matches_and_background_gradient_still_flows(gpu):
+    scene = torch_scene(800, seed=6)
+    cam = default_camera(48, 40)
+    names = ("means", "quats", "scales", "opacities", "colors")
+    view, K = torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K)
+    plain = rasterize(*(scene[k] for k in names), view, K, cam.width, cam.height, ctx=gpu)
+    graded = rasterize(*(scene[k].clone().requires_grad_() for k in names), view, K, cam.width, cam.height, ctx=gpu)
+    assert torch.equal(plain.color, graded.color.detach()) and torch.equal(plain.depth, graded.depth.detach())
+    # Only the background asks for a gradient: the render keeps no replay state and the gradient is exact.
+    bg = torch.tensor([0.1, 0.5, 0.9], requires_grad=True)
+    out = rasterize(*(scene[k] for k in names), view, K, cam.width, cam.height, background=bg, ctx=gpu)
+    out.color.sum().backward()
+    want = (1 - out.alpha.detach()).sum().expand(3)
+    torch.testing.assert_close(bg.grad, want, rtol=1e-5, atol=1e-4)

@@ -67,6 +67,6 @@ class AvatarRenderer:
     def render(self, params: dict, camera, background=(1.0, 1.0, 1.0)) -> np.ndarray:
         """Posed render as float32 [H, W, 3] (reads the image back)."""
         self.set_params(params)
-        state = self.rasterizer.forward(self.surfels, camera, np.asarray(background, np.float32))
+        state = self.rasterizer.forward(self.surfels, camera, np.asarray(background, np.float32), replay=False)
         return read_outputs(self.ctx, state).color
 

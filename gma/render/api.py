@@ -48,7 +48,8 @@ class _RasterizeFunction(torch.autograd.Function):
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
-        state = rast.forward(surfels, camera, bg)
+        # A render that no surfel gradient can come back to keeps nothing for the backward pass.
+        state = rast.forward(surfels, camera, bg, replay=any(fctx.needs_input_grad[:5]))
         out = read_outputs(gpu, state)
         fctx.state, fctx.surfels, fctx.rast = state, surfels, rast
         fctx.device = means.device
@@ -62,10 +63,12 @@ class _RasterizeFunction(torch.autograd.Function):
         if not any(needs[:5]) and not needs[7]:
             return (None,) * 12
         upstream = [None if g is None else host_array(g) for g in (v_color, v_alpha, v_normal, v_depth)]
-        grads = fctx.rast.backward(fctx.state, fctx.surfels, *upstream)
         dev = fctx.device
-        result = [torch.from_numpy(g).to(dev) if need else None
-                  for g, need in zip((grads.means, grads.quats, grads.scales, grads.opacities, grads.colors), needs)]
+        result = [None] * 5
+        if any(needs[:5]):
+            grads = fctx.rast.backward(fctx.state, fctx.surfels, *upstream)
+            result = [torch.from_numpy(g).to(dev) if need else None for g, need in
+                      zip((grads.means, grads.quats, grads.scales, grads.opacities, grads.colors), needs)]
         v_background = None
         if needs[7] and fctx.has_background and v_color is not None:
             # colour = sum w c + (1 - alpha) background: d/d background = sum over pixels of v_color (1 - alpha).
