@@ -258,7 +258,8 @@ class SurfelRasterizer:
         keeps freshly allocated buffers, everything :meth:`backward` needs. Without it the images land
         in scratch buffers that the next render overwrites (read them first), nothing for a backward
         pass is written or kept, and the rasterizer drops the contributor counting (the standard
-        scene, 100k surfels, lavapipe, interleaved: 1.055x and 1.088x faster in two runs); :meth:`backward` refuses such a state.
+        scene, 100k surfels, lavapipe, interleaved: 1.055x and 1.088x faster in two runs);
+        :meth:`backward` refuses such a state.
 
         Two submissions: projection, then (after reading the intersection count and the depth keys'
         range, the one host round trip) depth sort, scan, binning, tile sort and rasterization into
