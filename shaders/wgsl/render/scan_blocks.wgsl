@@ -4,8 +4,11 @@
 #include "common/scan_types.wgsl"
 #include "common/math.wgsl"
 
-const SCAN_WG: u32 = 256u;
-const SCAN_ITEMS: u32 = 4u;
+// 64 threads of 16 values: one thread scans the 64 partial sums alone (cheaper than a log-step scan's
+// barriers on CPUs). With 256 threads of 4 values that serial pass was 4x longer: the tile counts' scan
+// on lavapipe (100k values, gathered) took 2.4-2.8 against 1.9 ms.
+const SCAN_WG: u32 = 64u;
+const SCAN_ITEMS: u32 = 16u;
 
 
 @group(0) @binding(0) var<uniform> scan: ScanParams;
