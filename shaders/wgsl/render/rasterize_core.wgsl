@@ -268,10 +268,11 @@ fn quad_blocks(p: vec2<u32>) -> u32 {
 }
 
 // One pixel's compositing state: the result so far and this batch's sums (added at the batch's end).
+// A finished pixel (saturated, or outside the image) keeps its transmittance negated, so that T's sign
+// is the done flag (is_done) and the state needs no separate boolean register.
 struct PixelBlend {
     px: vec2<f32>,
     T: f32,
-    done: bool,
     acc_color: vec4<f32>,
     acc_nd: vec4<f32>,
     last: u32,
@@ -281,8 +282,7 @@ struct PixelBlend {
 fn start_blend(pix: vec2<u32>) -> PixelBlend {
     var b: PixelBlend;
     b.px = vec2<f32>(pix) + 0.5;
-    b.T = 1.0;
-    b.done = !(pix.x < params.image_size.x && pix.y < params.image_size.y);
+    b.T = select(-1.0, 1.0, pix.x < params.image_size.x && pix.y < params.image_size.y);
     b.result.transmittance = 1.0;
     return b;
 }
@@ -319,16 +319,20 @@ fn quad_alpha(s: ProjectedSurfel, c: ColumnAlpha, k: u32) -> AlphaEval {
     return alpha_from(s, c.p + dy * c.dp_dy, c.d + vec2<f32>(0.0, dy));
 }
 
+fn is_done(b: PixelBlend) -> bool {
+    return b.T < 0.0;
+}
+
 fn blend_select(alpha: f32, nd: vec4<f32>, col: vec4<f32>, index: u32, b: ptr<function, PixelBlend>) {
-    let next_T = (*b).T * (1.0 - alpha);
-    let contrib = alpha >= ALPHA_THRESHOLD && !(*b).done;
+    let T = (*b).T;
+    let next_T = T * (1.0 - alpha);
+    let contrib = alpha >= ALPHA_THRESHOLD && T > 0.0;
     let saturate = contrib && next_T <= TRANSMITTANCE_EPS;
     let use_it = contrib && !saturate;
-    (*b).done = (*b).done || saturate;
-    let w = select(0.0, alpha * (*b).T, use_it);
+    let w = select(0.0, alpha * T, use_it);
     (*b).acc_color += w * col;
     (*b).acc_nd += w * nd;
-    (*b).T = select((*b).T, next_T, use_it);
+    (*b).T = select(select(T, -T, saturate), next_T, use_it);
     (*b).last = select((*b).last, index, use_it);
 }
 
@@ -340,7 +344,7 @@ fn end_batch(b: ptr<function, PixelBlend>) {
     (*b).acc_color = vec4<f32>(0.0);
     (*b).acc_nd = vec4<f32>(0.0);
     (*b).last = 0u;
-    (*b).result.transmittance = (*b).T;
+    (*b).result.transmittance = abs((*b).T);
 }
 
 // composite_pixel for the four pixels of thread `lid` (first pixel `pix`, global), into *a .. *d.
@@ -355,7 +359,7 @@ fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
         atomicStore(&done_count, 0u);
     }
     workgroupBarrier();
-    atomicAdd(&done_count, u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done));
+    atomicAdd(&done_count, u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d)));
     let range = ranges[tile];
     let num_batches = ceil_div(range.y - range.x, BATCH);
     let tile_px = pix % TILE_SIZE;
@@ -372,10 +376,10 @@ fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
             batch_blocks[slot] = block_mask(isect_ids[base + slot], tile);
         }
         workgroupBarrier();
-        let was_done = u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done);
+        let was_done = u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d));
         let num_hits = list_hits(m, my_blocks, m, row, sg_lane);
         for (var h = 0u; h < num_hits; h += SG) {
-            if subgroupAll((*a).done && (*b).done && (*c).done && (*d).done) {
+            if subgroupAll(is_done(*a) && is_done(*b) && is_done(*c) && is_done(*d)) {
                 break;
             }
             let mine_slot = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
@@ -399,7 +403,7 @@ fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
         end_batch(b);
         end_batch(c);
         end_batch(d);
-        let now_done = u32((*a).done) + u32((*b).done) + u32((*c).done) + u32((*d).done);
+        let now_done = u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d));
         if now_done != was_done {
             atomicAdd(&done_count, now_done - was_done);
         }
