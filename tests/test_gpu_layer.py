@@ -55,9 +55,10 @@ def test_compile_error_prints_numbered_source(gpu, tmp_path):
 
 @pytest.mark.gpu
 def test_pipeline_cache_reuses_pipelines(gpu):
-    a = gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4})
-    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4}) is a
-    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 8}) is not a
+    a = gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4, "SORT_WG": 16})
+    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4, "SORT_WG": 16}) is a
+    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 8, "SORT_WG": 16}) is not a
+    assert gpu.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": 4, "SORT_WG": 128}) is not a
 
 
 def test_adapter_preference_errors(monkeypatch):
