@@ -184,3 +184,25 @@ def test_public_render_without_gradients_matches_and_background_gradient_still_f
     out.color.sum().backward()
     want = (1 - out.alpha.detach()).sum().expand(3)
     torch.testing.assert_close(bg.grad, want, rtol=1e-5, atol=1e-4)
+
+
+def test_public_render_under_no_grad_keeps_no_replay_state(gpu, monkeypatch):
+    """Surfels that require grad rendered under torch.no_grad (an evaluation during a fit): nothing is
+    kept for a backward pass that cannot come, and the images are the same."""
+    from gma.render import api
+
+    scene = torch_scene(600, seed=8)
+    cam = default_camera(40, 32)
+    names = ("means", "quats", "scales", "opacities", "colors")
+    view, K = torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K)
+    params = [scene[k].clone().requires_grad_() for k in names]
+    replays = []
+    rast = api.rasterizer_for(gpu)
+    original = rast.forward
+    monkeypatch.setattr(rast, "forward", lambda *a, **k: replays.append(k["replay"]) or original(*a, **k))
+    with torch.no_grad():
+        quiet = rasterize(*params, view, K, cam.width, cam.height, ctx=gpu)
+    graded = rasterize(*params, view, K, cam.width, cam.height, ctx=gpu)
+    assert replays == [False, True]
+    assert quiet.color.grad_fn is None and graded.color.grad_fn is not None
+    assert torch.equal(quiet.color, graded.color.detach())

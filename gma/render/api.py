@@ -42,14 +42,14 @@ class _RasterizeFunction(torch.autograd.Function):
     numpy (see :func:`gma.render.validate.host_array` for why not torch)."""
 
     @staticmethod
-    def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host):
+    def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host,
+                replay):
         fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
         surfels = SurfelBuffers.from_arrays(gpu, *host)  # host: float32 copies of the five surfel tensors
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
-        # A render that no surfel gradient can come back to keeps nothing for the backward pass.
-        state = rast.forward(surfels, camera, bg, replay=any(fctx.needs_input_grad[:5]))
+        state = rast.forward(surfels, camera, bg, replay=replay)
         out = read_outputs(gpu, state)
         fctx.state, fctx.surfels, fctx.rast = state, surfels, rast
         fctx.device = means.device
@@ -61,7 +61,7 @@ class _RasterizeFunction(torch.autograd.Function):
     def backward(fctx, v_color, v_alpha, v_normal, v_depth):
         needs = fctx.needs_input_grad
         if not any(needs[:5]) and not needs[7]:
-            return (None,) * 12
+            return (None,) * 13
         upstream = [None if g is None else host_array(g) for g in (v_color, v_alpha, v_normal, v_depth)]
         dev = fctx.device
         result = [None] * 5
@@ -74,7 +74,7 @@ class _RasterizeFunction(torch.autograd.Function):
             # colour = sum w c + (1 - alpha) background: d/d background = sum over pixels of v_color (1 - alpha).
             v_bg = (upstream[0] * (1 - fctx.alpha)).sum(axis=(0, 1), dtype=np.float64).astype(np.float32)
             v_background = torch.from_numpy(v_bg).to(dev)
-        return (*result, None, None, v_background, None, None, None, None)
+        return (*result, None, None, v_background, None, None, None, None, None)
 
 
 def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, height: int,
@@ -96,6 +96,9 @@ def rasterize(means, quats, scales, opacities, colors, viewmat, K, width: int, h
     viewmat, K, width, height = check_camera(viewmat, K, width, height)
     background = check_background(background, colors.shape[1])
     gpu = ctx or get_context()
+    # A render that no surfel gradient can come back to (none requires grad, or grad mode is off, as in
+    # an evaluation under torch.no_grad) keeps nothing for the backward pass (SurfelRasterizer.forward).
+    replay = torch.is_grad_enabled() and any(t.requires_grad for t in (means, quats, scales, opacities, colors))
     outs = _RasterizeFunction.apply(means, quats, scales, opacities, colors, viewmat, K, background, width, height,
-                                    gpu, host)
+                                    gpu, host, replay)
     return RenderOutput(*outs)
