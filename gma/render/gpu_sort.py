@@ -49,17 +49,16 @@ class RadixSorter:
         (wrapping), for keys that lie within ``2**bits`` above the base."""
         ctx = self.ctx
         passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
-        based = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
-        based["SORT_WG"] = self.threads
+        pass_defines = {"SORT_WG": self.threads, **({"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {})}
         extra = [base[0]] if base else []
         hist = self.workspace.get("sort.hist", (4 << RADIX_BITS) * sort_blocks(capacity))
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
-        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i, **based})
+        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i, **pass_defines})
                    for i in range(passes)]
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0, "SORT_WG": self.threads})
-        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i, **based})
+        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i, **pass_defines})
                      for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])
         for i in range(passes):

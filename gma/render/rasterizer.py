@@ -208,17 +208,16 @@ class SurfelRasterizer:
                                         st.sort_info, st.elem_info, st.stats], (1, 1, 1), "bin", timer)
 
     def bin_and_rasterize(self, encoder, surfels: SurfelBuffers, camera: Camera, st: ProjectionState,
-                          capacity: int, background: wgpu.GPUBuffer, target, timer: PassTimer | None = None,
-                          replay: bool = True):
+                          capacity: int, background: wgpu.GPUBuffer, target, timer: PassTimer | None = None):
         """Encode intersection emission, the tile sort, tile ranges and the rasterizer. ``target`` is a
-        list of output buffers (buffer variant: colour, alpha, normal, depth, then with ``replay`` the final
-        transmittance and contributor count the backward pass needs) or a GPUTextureView (texture
+        list of output buffers (buffer variant: colour, alpha, normal, depth, and for a render the backward
+        pass will replay, the final transmittance and contributor count) or a GPUTextureView (texture
         variant, never replayed)."""
         ctx, n = self.ctx, surfels.count
         tx, ty = tile_grid(camera.width, camera.height)
         cap = max(capacity, 1)
         isect_tiles = self.workspace.get("isect_tiles", 4 * cap)
-        replay = replay and not isinstance(target, wgpu.GPUTextureView)
+        replay = not isinstance(target, wgpu.GPUTextureView) and len(target) == 6
         if not replay:  # nothing outlives the frame: reuse
             isect_ids = self.workspace.get("isect_ids", 4 * cap)
             ranges = self.workspace.get("tile_ranges", 8 * tx * ty)
@@ -245,7 +244,7 @@ class SurfelRasterizer:
             resources = dict(enumerate(inputs + [target]))
         else:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay})
-            resources = dict(enumerate(inputs + list(target)[:6 if replay else 4]))
+            resources = dict(enumerate(inputs + list(target)))
         if defines["USE_SUBGROUPS"]:
             self._subgroup_staging(resources, st if n else None, empty)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
@@ -273,25 +272,23 @@ class SurfelRasterizer:
         num_isects = int(stats[1])
         ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
         hw = camera.width * camera.height
-        def image(label, nbytes):
+        def image(label, nbytes):  # kept for the backward pass, or scratch that the next render reuses
             return ctx.buffer(nbytes, label) if replay else self.workspace.get(label, nbytes)
 
-        outputs = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
-                   image("out.depth", 4 * hw)]
-        if replay:
-            outputs += [ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")]
+        images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
+                  image("out.depth", 4 * hw)]
+        replayed = [ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")] if replay else []
         background_buf = ctx.upload(bg, "background")
         enc = ctx.device.create_command_encoder()
         self.depth_order(enc, st, n, depth_key_bits(stats), timer)
         isect_ids, ranges = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
-                                                   outputs, timer, replay)
+                                                   images + replayed, timer)
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
-        if not replay:
-            outputs += [None, None]
-        return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *outputs)
+        return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
+                            *(replayed or (None, None)))
 
     def backward(self, state: ForwardState, surfels: SurfelBuffers, v_color: np.ndarray | None,
                  v_alpha: np.ndarray | None, v_normal: np.ndarray | None, v_depth: np.ndarray | None,
