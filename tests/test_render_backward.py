@@ -1,6 +1,7 @@
 """WGSL backward passes against the torch reference's autograd (float64), on lavapipe.
 
-Tolerances. The GPU accumulates float32 gradients with atomics in an arbitrary order and recovers the
+Tolerances. The GPU accumulates float32 gradients in another order than the reference (with atomics in
+an arbitrary order, or on lavapipe per-intersection records summed in a fixed one) and recovers the
 transmittance before each surfel by division, T_i = T_{i+1} / (1 - alpha_i), which amplifies rounding
 by up to 1 / T (T >= 1e-4 by construction); the reference works in float64 front to back. Measured
 agreement is ~1e-5 of the largest gradient of each input. We require every gradient entry to be within
@@ -16,7 +17,7 @@ import pytest
 import torch
 from render_helpers import default_camera, special_surfels, torch_scene
 
-from gma.render import SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference
+from gma.render import SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference, read_outputs
 
 pytestmark = pytest.mark.gpu
 NAMES = ("means", "quats", "scales", "opacities", "colors")
@@ -40,11 +41,12 @@ def random_upstream(cam, channels=3, seed=0, which=("color", "alpha", "normal", 
             for k, c in shapes.items()}
 
 
-def gpu_grads(gpu, scene, cam, upstream, background=None, subgroups=None, float_atomics=True):
+def gpu_grads(gpu, scene, cam, upstream, background=None, subgroups=None, float_atomics=True, records=True):
     rast = SurfelRasterizer(gpu)
     if subgroups is not None:
         rast.use_subgroups = subgroups and rast.use_subgroups
     rast.use_float_atomics = float_atomics
+    rast.use_grad_records = records and rast.use_grad_records
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
     state = rast.forward(buffers, cam, background)
     g = rast.backward(state, buffers, upstream["color"], upstream["alpha"], upstream["normal"], upstream["depth"])
@@ -69,15 +71,68 @@ def test_gradients_match_reference(gpu, n, size):
     assert_grads_close(gpu_grads(gpu, scene, cam, up), reference_grads(scene, cam, up))
 
 
-@pytest.mark.parametrize("subgroups,float_atomics", [(True, True), (True, False), (False, True), (False, False)])
-def test_every_kernel_variant(gpu, subgroups, float_atomics):
-    """Subgroup (CPU adapters) and plain (GPU) variants, native float atomics and compare-and-swap."""
+@pytest.mark.parametrize("subgroups,float_atomics,records", [(True, True, True), (True, True, False),
+                                                             (True, False, False), (False, True, False),
+                                                             (False, False, False)])
+def test_every_kernel_variant(gpu, subgroups, float_atomics, records):
+    """Subgroup (CPU adapters) and plain (GPU) variants; gradient records (lavapipe), native float atomics
+    and compare-and-swap."""
     scene = torch_scene(400, seed=4)
     cam = default_camera(45, 37)
     up = random_upstream(cam, seed=1)
     bg = np.array([0.3, 0.1, 0.7], np.float32)
-    got = gpu_grads(gpu, scene, cam, up, bg, subgroups=subgroups, float_atomics=float_atomics)
+    got = gpu_grads(gpu, scene, cam, up, bg, subgroups=subgroups, float_atomics=float_atomics, records=records)
     assert_grads_close(got, reference_grads(scene, cam, up, bg))
+
+
+@pytest.mark.parametrize("which", [("color",), ("color", "alpha", "normal", "depth")])
+def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
+    """On lavapipe the subgroup backward sums per-intersection records in a fixed order: the same
+    gradients, bit for bit, on every run, and the atomics' sums up to float32 reordering. The images do
+    not depend on whether the forward kept the record index (its keys carry more than the tile)."""
+    rast = SurfelRasterizer(gpu)
+    if not rast.use_grad_records:
+        pytest.skip("gradient records need lavapipe's subgroup rasterizer")
+    scene = torch_scene(3000, seed=21, spread=0.6, scale_range=(0.02, 0.15))
+    cam = default_camera(96, 80)
+    up = random_upstream(cam, seed=7, which=which)
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+
+    def run(records):
+        rast.use_grad_records = records
+        state = rast.forward(buffers, cam)
+        assert (state.records is not None) == records
+        images = read_outputs(gpu, state)
+        g = rast.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"])
+        return images, {k: getattr(g, k) for k in NAMES}
+
+    images, first = run(True)
+    lists = rast.forward(buffers, cam).num_isects
+    assert lists > 3 * 3000 // 2, "the scene should spread surfels over several tiles each"
+    for _ in range(3):
+        _, again = run(True)
+        for k in NAMES:
+            assert np.array_equal(again[k], first[k]), k
+    plain_images, atomics = run(False)
+    for k in ("color", "alpha", "normal", "depth"):
+        assert np.array_equal(getattr(images, k), getattr(plain_images, k)), k
+    for k in NAMES:
+        scale = float(np.abs(atomics[k]).max())
+        assert np.abs(first[k] - atomics[k]).max() <= 1e-5 * scale, k
+
+
+def test_gradient_records_only_where_they_fit(gpu):
+    """Records need a tile id below the key's number field and a buffer binding that holds them; a
+    render beyond either (or with more than 4 channels: the plain rasterizer) falls back to atomics."""
+    rast = SurfelRasterizer(gpu)
+    if not rast.use_grad_records:
+        pytest.skip("gradient records need lavapipe's subgroup rasterizer")
+    assert rast._records_for(default_camera(512, 512), 3, 224_000)
+    assert rast._records_for(default_camera(4112, 64), 3, 1000)   # 257 x 4 tiles
+    assert not rast._records_for(default_camera(4112, 4112), 3, 1000)  # 66049 tiles > 65536
+    assert not rast._records_for(default_camera(64, 64), 5, 1000)      # plain rasterizer
+    too_many = gpu.max_binding_bytes // 80 + 1
+    assert not rast._records_for(default_camera(64, 64), 3, too_many)
 
 
 def test_context_without_float_atomics(gpu_no_float_atomics):

@@ -1,5 +1,6 @@
 """The numpy mirrors in gma/render/layouts.py match the WGSL structs byte for byte: a shader reads
-each struct field and writes it out, and the values must come back unchanged."""
+each struct field and writes it out, and the values must come back unchanged. So do the constants the
+Python side mirrors."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import pytest
 import wgpu
 
 from gma.render.layouts import DISPATCH_INFO, PROJECTED_SURFEL, RENDER_PARAMS, render_params
+from gma.render.rasterizer import RECORD_KEY_SHIFT
 
 pytestmark = pytest.mark.gpu
 
@@ -32,6 +34,8 @@ fn main() {
     }
     out[48] = f32(info.groups_x); out[49] = f32(info.groups_y); out[50] = f32(info.groups_z);
     out[51] = f32(info.count);
+    out[52] = f32(RECORD_KEY_SHIFT);
+    out[53] = f32(TILE_KEY_MASK);
 }
 """
 
@@ -66,3 +70,4 @@ def test_struct_layouts_match_wgsl(gpu):
     np.testing.assert_array_equal(got[32:48], np.arange(1, 17))
     np.testing.assert_array_equal(got[48:52], [3, 1, 1, 4000])
     assert RENDER_PARAMS.itemsize == 128 and PROJECTED_SURFEL.itemsize == 64
+    np.testing.assert_array_equal(got[52:54], [RECORD_KEY_SHIFT, (1 << RECORD_KEY_SHIFT) - 1])

@@ -78,6 +78,13 @@ class GpuContext:
         return self.adapter.info.get("adapter_type") == "CPU"
 
     @property
+    def is_lavapipe(self) -> bool:
+        """Mesa's software Vulkan driver (llvmpipe): its workgroups run on one CPU thread each, their
+        subgroups one after another between barriers, which the renderer's gradient records rely on."""
+        info = self.adapter.info
+        return "llvmpipe" in f"{info.get('vendor', '')} {info.get('device', '')}".lower()
+
+    @property
     def has_float_atomics(self) -> bool:
         return "shader-float32-atomic" in self.features
 

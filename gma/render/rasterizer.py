@@ -30,6 +30,7 @@ MAX_WORKGROUPS = 65535
 MAX_IMAGE_SIDE = 65535  # project_fwd.wgsl packs 4x2-block coordinates in 16 bits (rasterize() already caps at 16384)
 DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
 RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
+RECORD_KEY_SHIFT = 16  # render_types.wgsl: bits of a record-carrying intersection key that hold the tile
 
 
 @dataclass
@@ -51,6 +52,16 @@ class ProjectionState:
 
 
 @dataclass
+class RecordIndex:
+    """Where a render's backward pass writes and finds per-intersection gradient records (see
+    flush_records in rasterize_bwd.wgsl): the tile-sorted keys, which carry each intersection's number
+    within its surfel's list, and each surfel's first emission index."""
+
+    isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
+    record_base: wgpu.GPUBuffer   # [N] by surfel id (written for listed surfels only)
+
+
+@dataclass
 class ForwardState:
     """Exactly what the backward pass needs from a forward render, plus the output images."""
 
@@ -68,6 +79,7 @@ class ForwardState:
     depth: wgpu.GPUBuffer         # [H, W]
     final_t: wgpu.GPUBuffer | None  # [H, W] (None: rendered with replay=False)
     last: wgpu.GPUBuffer | None     # [H, W] contributors per pixel (u32)
+    records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
 
 
 def _bits_for(count: int) -> int:
@@ -106,6 +118,11 @@ class SurfelRasterizer:
         wanted = os.environ.get("GMA_RASTER_SUBGROUPS", "auto").strip().lower()
         capable = ctx.has_subgroups and 1 <= ctx.subgroup_size <= 32
         self.use_subgroups = capable and (ctx.is_software if wanted == "auto" else wanted in ("1", "true", "on"))
+        # On lavapipe the subgroup backward adds its gradients into per-intersection records with plain
+        # loads and stores instead of per-surfel atomics (faster, and the same gradients on every run; see
+        # flush_records in rasterize_bwd.wgsl for why this is safe there only). Tests switch it off to
+        # exercise the atomics.
+        self.use_grad_records = self.use_subgroups and ctx.is_lavapipe and ctx.subgroup_size == 8
         self.last_timings: dict[str, float] = {}
 
     # -- variants -----------------------------------------------------------------------------------
@@ -127,6 +144,15 @@ class SurfelRasterizer:
         if sg:
             defines.update(USE_SUBGROUPS=True, SG=sg)
         return defines
+
+    def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
+        """Whether a replayed render keeps the index for gradient records: the lavapipe subgroup
+        variant, tile ids that fit below RECORD_KEY_SHIFT, and records that fit one buffer binding."""
+        tx, ty = tile_grid(camera.width, camera.height)
+        record_bytes = 4 * (16 + 4) * max(num_isects, 1)
+        return (self.use_grad_records and self.raster_defines(channels)["USE_SUBGROUPS"]
+                and tx * ty <= 1 << RECORD_KEY_SHIFT and record_bytes <= self.ctx.max_binding_bytes
+                and num_isects <= MAX_WORKGROUPS * 256)  # record_slots.wgsl: one thread per intersection
 
     # -- passes -------------------------------------------------------------------------------------
     def _dispatch(self, encoder, pipeline, buffers, groups, name, timer):
@@ -212,26 +238,32 @@ class SurfelRasterizer:
         """Encode intersection emission, the tile sort, tile ranges and the rasterizer. ``target`` is a
         list of output buffers (buffer variant: colour, alpha, normal, depth, and for a render the backward
         pass will replay, the final transmittance and contributor count) or a GPUTextureView (texture
-        variant, never replayed)."""
+        variant, never replayed). Returns the tile-sorted surfel ids, the tile ranges and, for a replayed
+        render whose backward will sum gradient records (:meth:`_records_for`), their :class:`RecordIndex`."""
         ctx, n = self.ctx, surfels.count
         tx, ty = tile_grid(camera.width, camera.height)
         cap = max(capacity, 1)
-        isect_tiles = self.workspace.get("isect_tiles", 4 * cap)
         replay = not isinstance(target, wgpu.GPUTextureView) and len(target) == 6
+        records = None
         if not replay:  # nothing outlives the frame: reuse
+            isect_tiles = self.workspace.get("isect_tiles", 4 * cap)
             isect_ids = self.workspace.get("isect_ids", 4 * cap)
             ranges = self.workspace.get("tile_ranges", 8 * tx * ty)
         else:  # kept in the ForwardState for the backward pass
             isect_ids = ctx.buffer(4 * cap, "isect_ids")
             ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
+            if self._records_for(camera, surfels.channels, capacity):
+                records = RecordIndex(ctx.buffer(4 * cap, "isect_keys"), ctx.buffer(4 * max(n, 1), "record_base"))
+            isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
+        keyed = {"RECORD_KEYS": records is not None}
         if n > 0:
             self._setup(encoder, st, timer)
-            emit = ctx.compute_pipeline("render/emit_isects.wgsl")
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl", keyed)
             self._dispatch(encoder, emit, [st.params, st.depth_order, st.isect_offsets, st.tile_counts,
-                                           st.tile_rects, isect_tiles, isect_ids], ((n + 255) // 256, 1, 1),
-                           "bin", timer)
+                                           st.tile_rects, isect_tiles, isect_ids]
+                           + ([records.record_base] if records else []), ((n + 255) // 256, 1, 1), "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
-            rng = ctx.compute_pipeline("render/tile_ranges.wgsl")  # writes every tile's range
+            rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
         else:
@@ -248,7 +280,7 @@ class SurfelRasterizer:
         if defines["USE_SUBGROUPS"]:
             self._subgroup_staging(resources, st if n else None, empty)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
-        return isect_ids, ranges
+        return isect_ids, ranges, records
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
@@ -281,14 +313,14 @@ class SurfelRasterizer:
         background_buf = ctx.upload(bg, "background")
         enc = ctx.device.create_command_encoder()
         self.depth_order(enc, st, n, depth_key_bits(stats), timer)
-        isect_ids, ranges = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
-                                                   images + replayed, timer)
+        isect_ids, ranges, records = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
+                                                            images + replayed, timer)
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
-                            *(replayed or (None, None)))
+                            *(replayed or (None, None)), records=records)
 
     def backward(self, state: ForwardState, surfels: SurfelBuffers, v_color: np.ndarray | None,
                  v_alpha: np.ndarray | None, v_normal: np.ndarray | None, v_depth: np.ndarray | None,
@@ -316,32 +348,43 @@ class SurfelRasterizer:
                 upstream[binding] = ctx.buffer(4 * hw * per_pixel, name)  # wgpu zero-fills new buffers
             else:
                 upstream[binding] = ctx.upload(np.asarray(arr, np.float32).reshape(-1), name)
-        v_proj = ctx.buffer(4 * 16 * n, "v_proj")
+        records = state.records
         v_colors = ctx.buffer(4 * c * n, "v_colors")
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
-        defines["NORMAL_DEPTH_GRADS"] = normal_depth
+        defines.update(NORMAL_DEPTH_GRADS=normal_depth, GRAD_RECORDS=records is not None)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
                                     state.tile_ranges, state.background, state.final_t, state.last]))
         resources.update(upstream)
-        resources.update({12: v_proj, 13: v_colors})
+        if records:
+            resources[12] = grads = self._cleared_records(enc, state.num_isects, normal_depth)
+        else:
+            grads = ctx.buffer(4 * 16 * n, "v_proj")
+            resources.update({12: grads, 13: v_colors})
         # The subgroup variant without normal and depth gradients adds the colour gradients into their
         # slots of v_proj (fewer rounds of atomics, see rasterize_bwd.wgsl); project_bwd copies them out.
+        # With records project_bwd writes every colour gradient.
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
+        colors_out = color_in_proj or records is not None
         if defines["USE_SUBGROUPS"]:
             self._subgroup_staging(resources, state.proj)
-        if color_in_proj:
-            del resources[13]
+        if colors_out:
+            resources.pop(13, None)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [ctx.buffer(4 * k * n, name) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                            ("v_opacities", 1))]
-        proj = ctx.compute_pipeline("render/project_bwd.wgsl",
-                                    {"COLOR_IN_PROJ": color_in_proj, "CHANNELS": c} if color_in_proj else None)
-        self._dispatch(enc, proj, [state.proj.params, surfels.means, surfels.quats, surfels.scales,
-                                   state.proj.tile_counts, v_proj, *outs] + ([v_colors] if color_in_proj else []),
-                       ((n + 255) // 256, 1, 1), "project_bwd", timer)
+        proj_resources = dict(enumerate([state.proj.params, surfels.means, surfels.quats, surfels.scales,
+                                         state.proj.tile_counts, grads, *outs]))
+        if colors_out:
+            proj_resources[10] = v_colors
+        if records:
+            proj_resources.update({11: records.record_base, 12: self._record_slots(enc, state, timer)})
+        proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
+                        "NORMAL_DEPTH_GRADS": normal_depth, "COLORS_OUT": colors_out, "CHANNELS": c}
+        proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
+        self._dispatch(enc, proj, proj_resources, ((n + 255) // 256, 1, 1), "project_bwd", timer)
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
@@ -350,6 +393,24 @@ class SurfelRasterizer:
              (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
         return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
                            colors.reshape(n, c))
+
+    def _cleared_records(self, enc, num_isects: int, normal_depth: bool) -> wgpu.GPUBuffer:
+        """Zeroed gradient records (flush_records in rasterize_bwd.wgsl): per intersection 16 values,
+        with normal/depth gradients 4 colours after them. Scratch: backward reads the gradients back
+        before it returns (a fresh buffer per call cost lavapipe page faults and wgpu's zero-fill)."""
+        nbytes = 4 * (20 if normal_depth else 16) * max(num_isects, 1)
+        records = self.workspace.get("grad_records", nbytes)
+        enc.clear_buffer(records, 0, nbytes)
+        return records
+
+    def _record_slots(self, enc, state: ForwardState, timer) -> wgpu.GPUBuffer:
+        """Encode record_slots.wgsl: where each surfel's gradient records lie, by emission index."""
+        slots = self.workspace.get("record_slots", 4 * max(state.num_isects, 1))
+        rec = state.records
+        self._dispatch(enc, self.ctx.compute_pipeline("render/record_slots.wgsl"),
+                       [state.proj.params, rec.isect_keys, state.isect_ids, rec.record_base, slots],
+                       ((state.num_isects + 255) // 256, 1, 1), "record_slots", timer)
+        return slots
 
     def backward_defines(self, channels: int) -> dict:
         defines = self.raster_defines(channels)

@@ -7,6 +7,11 @@ const MAX_ALPHA: f32 = 0.999;
 const TRANSMITTANCE_EPS: f32 = 1e-4;          // compositing stops before T would reach this
 const NEAR_PLANE: f32 = 0.01;
 const CULLED_KEY: u32 = 0xffffffffu;
+// Intersection keys of a render whose backward pass sums gradient records (RECORD_KEYS in
+// emit_isects.wgsl) carry, above the tile id, the intersection's number within its surfel's list
+// (the tile sort orders at most 16 bits, so the tile grid has at most 65536 tiles there).
+const RECORD_KEY_SHIFT: u32 = 16u;
+const TILE_KEY_MASK: u32 = 0xffffu;
 
 // Per-frame parameters (uniform, 128 bytes).
 struct RenderParams {

@@ -2,6 +2,10 @@
 // pair per tile of its rectangle at its scanned offset. Emitting in depth order means a stable sort by
 // tile alone leaves each tile's list sorted front to back. A surfel is listed in the tiles of its box
 // rectangle that its footprint reaches (tile_list in project_fwd.wgsl).
+// Define RECORD_KEYS (a render whose backward sums per-intersection gradient records, see
+// rasterize_bwd.wgsl): each key also carries, from bit RECORD_KEY_SHIFT, the intersection's number k
+// within its surfel's list, and the surfel's first list index goes to record_base, so that the
+// intersection's emission index, record_base[surfel] + k, is known after the tile sort too.
 #include "common/render_types.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
@@ -11,6 +15,9 @@
 @group(0) @binding(4) var<storage, read> tile_rects: array<vec4<u32>>;   // [N] see tile_list
 @group(0) @binding(5) var<storage, read_write> isect_tiles: array<u32>;
 @group(0) @binding(6) var<storage, read_write> isect_ids: array<u32>;
+#if RECORD_KEYS
+@group(0) @binding(7) var<storage, read_write> record_base: array<u32>;   // [N] by surfel id
+#endif
 
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -25,7 +32,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let tiles = tile_rects[sid];
     let lo = vec2<u32>(tiles.x & 0xffffu, tiles.x >> 16u);
     let hi = vec2<u32>(tiles.y & 0xffffu, tiles.y >> 16u);
-    var out = offsets[i];
+    let first = offsets[i];
+    var out = first;
+#if RECORD_KEYS
+    record_base[sid] = first;
+#endif
     let cap = params.isect_capacity;
     for (var ty = lo.y; ty <= hi.y; ty++) {
         for (var tx = lo.x; tx <= hi.x; tx++) {
@@ -35,7 +46,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if out >= cap {
                 return;
             }
+#if RECORD_KEYS
+            isect_tiles[out] = (ty * params.tile_grid.x + tx) | ((out - first) << RECORD_KEY_SHIFT);
+#else
             isect_tiles[out] = ty * params.tile_grid.x + tx;
+#endif
             isect_ids[out] = sid;
             out++;
         }

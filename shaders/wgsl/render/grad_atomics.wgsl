@@ -1,7 +1,9 @@
 // Gradient accumulation into the per-surfel gradient buffers, with native float atomics where the
 // adapter offers them (define FLOAT_ATOMICS) and a compare-and-swap loop on the bit pattern otherwise.
 // Bindings 12 (projection gradients, 16 floats per surfel) and 13 (colour gradients, CHANNELS each).
+// Not declared with GRAD_RECORDS (rasterize_bwd.wgsl), which writes per-intersection records instead.
 
+#if !GRAD_RECORDS
 #if FLOAT_ATOMICS
 @group(0) @binding(12) var<storage, read_write> v_proj: array<atomic<f32>>;     // [N, 16]
 @group(0) @binding(13) var<storage, read_write> v_colors: array<atomic<f32>>;   // [N, CHANNELS]
@@ -38,6 +40,7 @@ fn add_color(i: u32, v: f32) {
         old = r.old_value;
     }
 }
+#endif
 #endif
 
 // Layout of the 16 projection gradients of one surfel (mirrored in gma/render/layouts.py).

@@ -3,6 +3,11 @@
 // and scales, by recomputing the forward projection (cheaper than storing its intermediates).
 // Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
 // the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
+// Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection (flush_records in
+// rasterize_bwd.wgsl); a surfel's are listed, in emission order, at slots[record_base ..
+// record_base + tile count) (record_slots.wgsl) and summed here in that order, the same on every run,
+// into the projection and colour gradients (NORMAL_DEPTH_GRADS says which record layout).
+// COLORS_OUT: this pass writes v_colors (with COLOR_IN_PROJ or GRAD_RECORDS).
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
 
@@ -11,14 +16,108 @@
 @group(0) @binding(2) var<storage, read> quats: array<f32>;        // [N, 4]
 @group(0) @binding(3) var<storage, read> scales: array<f32>;       // [N, 2]
 @group(0) @binding(4) var<storage, read> tile_counts: array<u32>;  // [N], 0 when culled
+#if GRAD_RECORDS
+@group(0) @binding(5) var<storage, read> records: array<vec4<f32>>;  // [isects, RECORD_VEC4S]
+@group(0) @binding(11) var<storage, read> record_base: array<u32>;   // [N] by surfel id
+@group(0) @binding(12) var<storage, read> slots: array<u32>;         // [isects] by emission index
+#else
 @group(0) @binding(5) var<storage, read> v_proj: array<f32>;       // [N, 16] (layout: grad_atomics.wgsl)
+#endif
 @group(0) @binding(6) var<storage, read_write> v_means: array<f32>;     // [N, 3]
 @group(0) @binding(7) var<storage, read_write> v_quats: array<f32>;     // [N, 4]
 @group(0) @binding(8) var<storage, read_write> v_scales: array<f32>;    // [N, 2]
 @group(0) @binding(9) var<storage, read_write> v_opacities: array<f32>; // [N]
-#if COLOR_IN_PROJ
+#if COLORS_OUT
 @group(0) @binding(10) var<storage, read_write> v_colors: array<f32>;   // [N, CHANNELS]
 #endif
+
+// The rasterizer's gradients of one surfel (see G_* in grad_atomics.wgsl).
+struct RasterGrads {
+    v_t0: vec3<f32>,
+    v_t1: vec3<f32>,
+    v_t2: vec3<f32>,
+    v_mu2d: vec2<f32>,
+    v_opacity: f32,
+    v_normal: vec3<f32>,
+    v_depth: f32,
+    v_color: vec4<f32>,   // channels 0-3, where this pass writes them (COLORS_OUT)
+}
+
+#if GRAD_RECORDS
+#if NORMAL_DEPTH_GRADS
+const RECORD_VEC4S: u32 = 5u;
+#else
+const RECORD_VEC4S: u32 = 4u;
+#endif
+
+// Sum of surfel i's records. A record holds V0-15 of flush_records pairwise, (V[l], V[l + 8]) as vec2
+// number l, so its vec4s are (V0 V8 V1 V9) (V2 V10 V3 V11) (V4 V12 V5 V13) (V6 V14 V7 V15), with
+// V0-2 = dL/dT0, V3 opacity, V4-6 = dL/dT1, V7 mu2d.x, V8-10 = dL/dT2, V11 mu2d.y, V12-15 = normal and
+// depth (a fifth vec4 then holds the colours) or the colours. Tried: one thread per intersection in
+// tile order summing its surfel's records where it holds the first (neighbouring threads gather
+// neighbouring tiles' records): 25 against ~13 ms (standard scene, lavapipe), as most lanes idle.
+fn raster_grads(i: u32) -> RasterGrads {
+    let first = record_base[i];
+    let end = min(first + tile_counts[i], params.isect_capacity);
+    var s0 = vec4<f32>(0.0);
+    var s1 = vec4<f32>(0.0);
+    var s2 = vec4<f32>(0.0);
+    var s3 = vec4<f32>(0.0);
+    var s4 = vec4<f32>(0.0);
+    for (var e = first; e < end; e++) {
+        let r = slots[e] * RECORD_VEC4S;
+        s0 += records[r];
+        s1 += records[r + 1u];
+        s2 += records[r + 2u];
+        s3 += records[r + 3u];
+#if NORMAL_DEPTH_GRADS
+        s4 += records[r + 4u];
+#endif
+    }
+    var g: RasterGrads;
+    g.v_t0 = vec3<f32>(s0.x, s0.z, s1.x);
+    g.v_opacity = s1.z;
+    g.v_t1 = vec3<f32>(s2.x, s2.z, s3.x);
+    g.v_mu2d = vec2<f32>(s3.z, s1.w);
+    g.v_t2 = vec3<f32>(s0.y, s0.w, s1.y);
+    let tail = vec4<f32>(s2.y, s2.w, s3.y, s3.w);
+#if NORMAL_DEPTH_GRADS
+    g.v_normal = tail.xyz;
+    g.v_depth = tail.w;
+    g.v_color = s4;
+#else
+    g.v_normal = vec3<f32>(0.0);
+    g.v_depth = 0.0;
+    g.v_color = tail;
+#endif
+    return g;
+}
+#else
+fn raster_grads(i: u32) -> RasterGrads {
+    let g = i * 16u;
+    var r: RasterGrads;
+    r.v_t0 = vec3<f32>(v_proj[g], v_proj[g + 1u], v_proj[g + 2u]);
+    r.v_t1 = vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]);
+    r.v_t2 = vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]);
+    r.v_mu2d = vec2<f32>(v_proj[g + 9u], v_proj[g + 10u]);
+    r.v_opacity = v_proj[g + 11u];
+#if COLOR_IN_PROJ
+    r.v_normal = vec3<f32>(0.0);
+    r.v_depth = 0.0;
+    r.v_color = vec4<f32>(v_proj[g + 12u], v_proj[g + 13u], v_proj[g + 14u], v_proj[g + 15u]);
+#else
+    r.v_normal = vec3<f32>(v_proj[g + 12u], v_proj[g + 13u], v_proj[g + 14u]);
+    r.v_depth = v_proj[g + 15u];
+    r.v_color = vec4<f32>(0.0);   // in v_colors, written by the rasterizer
+#endif
+    return r;
+}
+#endif
+
+// Colour channel c (< 4) of v.
+fn channel(v: vec4<f32>, c: u32) -> f32 {
+    return select(select(select(v.x, v.y, c == 1u), v.z, c == 2u), v.w, c == 3u);
+}
 
 // Gradient of R(q / |q|) with respect to q, given dL/dR (columns of v_r are dL/d(column)).
 fn quat_backward(q_in: vec4<f32>, v_r: mat3x3<f32>) -> vec4<f32> {
@@ -48,13 +147,22 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if i >= params.num_surfels {
         return;
     }
-    let g = i * 16u;
-#if COLOR_IN_PROJ
+    let culled = tile_counts[i] == 0u;
+#if GRAD_RECORDS
+    // record_base is written only for listed surfels; a culled one has no records.
+    var rg: RasterGrads;
+    if !culled {
+        rg = raster_grads(i);
+    }
+#else
+    let rg = raster_grads(i);
+#endif
+#if COLORS_OUT
     for (var c = 0u; c < CHANNELS; c++) {
-        v_colors[i * CHANNELS + c] = v_proj[g + 12u + c];
+        v_colors[i * CHANNELS + c] = select(channel(rg.v_color, c), 0.0, culled);
     }
 #endif
-    if tile_counts[i] == 0u {
+    if culled {
         v_means[3u * i] = 0.0;
         v_means[3u * i + 1u] = 0.0;
         v_means[3u * i + 2u] = 0.0;
@@ -91,17 +199,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let f = vec3<f32>(1.0, 1.0, -1.0) / denom;
     let mu2d = vec2<f32>(dot(f, t0 * t2), dot(f, t1 * t2));
 
-    var v_t0 = vec3<f32>(v_proj[g], v_proj[g + 1u], v_proj[g + 2u]);
-    var v_t1 = vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]);
-    var v_t2 = vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]);
-    let v_mu2d = vec2<f32>(v_proj[g + 9u], v_proj[g + 10u]);
-#if COLOR_IN_PROJ
-    let v_normal = vec3<f32>(0.0);
-    let v_depth = 0.0;
-#else
-    let v_normal = vec3<f32>(v_proj[g + 12u], v_proj[g + 13u], v_proj[g + 14u]);
-    let v_depth = v_proj[g + 15u];
-#endif
+    var v_t0 = rg.v_t0;
+    var v_t1 = rg.v_t1;
+    var v_t2 = rg.v_t2;
+    let v_mu2d = rg.v_mu2d;
+    let v_normal = rg.v_normal;
+    let v_depth = rg.v_depth;
 
     // mu2d = (sum_j f_j T0j T2j, sum_j f_j T1j T2j), f = (1, 1, -1) / denom.
     v_t0 += v_mu2d.x * f * t2;
@@ -131,5 +234,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     v_quats[4u * i + 3u] = v_q.w;
     v_scales[2u * i] = v_su;
     v_scales[2u * i + 1u] = v_sv;
-    v_opacities[i] = v_proj[g + 11u];
+    v_opacities[i] = rg.v_opacity;
 }

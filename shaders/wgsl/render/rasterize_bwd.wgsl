@@ -2,9 +2,10 @@
 // compositing back to front, starting from its final transmittance and last contributor, recovering
 // T before each surfel as T_after / (1 - alpha). Per surfel it produces the gradients of the pixel's
 // outputs with respect to the ray transform T, the projected centre, opacity, colour, normal and depth.
-// Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG; that variant needs CHANNELS <= 4), and
+// Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG; that variant needs CHANNELS <= 4),
 // NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
-// are then zero and neither summed nor scattered; the buffer entries stay zero).
+// are then zero and neither summed nor scattered; the buffer entries stay zero), and GRAD_RECORDS
+// (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics; see flush_records).
 #include "render/rasterize_core.wgsl"
 #include "render/grad_atomics.wgsl"
 
@@ -46,6 +47,7 @@ fn alpha_backward(a: AlphaEval, v_alpha_in: f32) -> AlphaGrad {
     return g;
 }
 
+#if !USE_SUBGROUPS
 fn flush(sid: u32, g: SurfelGrad) {
     let b = sid * G_STRIDE;
     add_proj(b + G_T0, g.v_t0.x);
@@ -67,6 +69,7 @@ fn flush(sid: u32, g: SurfelGrad) {
     add_proj(b + G_DEPTH, g.v_nd.w);
 #endif
 }
+#endif
 
 #if !USE_SUBGROUPS
 var<workgroup> batch_ids: array<u32, BATCH>;
@@ -186,6 +189,45 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
     return w * (*r).v_col;
 }
 
+#if GRAD_RECORDS
+// Gradient records: one per intersection, at its place in the tile-sorted list, RECORD_VEC2S vec2s
+// each, zeroed before the pass and summed per surfel by project_bwd.wgsl (record_slots.wgsl lists each
+// surfel's records). Every subgroup of the tile's workgroup that
+// the surfel reaches adds its totals to the record with plain loads and stores: no other workgroup
+// touches it, and lavapipe runs a workgroup's subgroups one after another on one thread, switching
+// only at barriers (there are none between a flush's load and store), while a subgroup's lanes own
+// distinct elements. Hence only on lavapipe (SurfelRasterizer.use_grad_records). Against a float
+// atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about a third of this
+// pass) and with each lane's two totals adjacent (one vec2 load and store per lane instead of two
+// scalar atomics): standard scene, 100k surfels, same runs, this pass 92.6-94.3 against 115.0-117.0 ms,
+// the sums +12 ms (record_slots 2.5, project_bwd 15 against 5.6), the public call in one process,
+// interleaved, forward 0.98x and backward 0.96x. Records at the emission index instead, so that the
+// sums read them in order, made this pass ~12 ms slower (scattered read-modify-writes). The sums run in
+// a fixed order, so the gradients are the same on every run, also under load.
+@group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]
+
+#if NORMAL_DEPTH_GRADS
+const RECORD_VEC2S: u32 = 10u;   // V0-15 as below, then the colours 0-3
+#else
+const RECORD_VEC2S: u32 = 8u;    // V0-15 (the colours in V12-15)
+#endif
+
+// Add a hit's totals over the subgroup (see flush_scattered8 for a, b, c, tail, e) to record `rec`:
+// lane l holds V[l] and V[l + 8] and adds them to the record's vec2 number l.
+fn flush_records(rec: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, tail: vec4<f32>, e: vec4<f32>,
+                 sg_lane: u32) {
+    let t = scatter16(a, b, c, tail, sg_lane);
+    let r = rec * RECORD_VEC2S + sg_lane;
+    records[r] += t;
+#if NORMAL_DEPTH_GRADS
+    let e_total = scatter_colors8(e, sg_lane);   // lanes 0, 2, 4, 6: colours 0-3
+    let ch = sg_lane >> 1u;
+    if (sg_lane & 1u) == 0u && ch < CHANNELS {
+        records[rec * RECORD_VEC2S + 8u + (ch >> 1u)][ch & 1u] += e_total;
+    }
+#endif
+}
+#else
 // Add a hit's gradient totals over the subgroup to surfel `sid`'s gradients: a, b, c (the packed
 // projection values, see proj_component), d (normal, depth), e (colours), one lane's share each.
 // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than log2(SG) xor-shuffles
@@ -265,6 +307,7 @@ fn flush_scattered8(sid: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, tail: ve
     }
 #endif
 }
+#endif
 
 // Totals over 8 lanes of V0-15 (V0-3 = a, V4-7 = b, V8-11 = c, V12-15 = d), reduce-scattered: lane l
 // gets those of V[l] (.x) and V[l + 8] (.y). Rounds over lane bits 2, 1, 0, as the butterfly's.
@@ -379,11 +422,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #else
                     let tail = g_col;   // the colour gradients, in the normal and depth slots
 #endif
+#if GRAD_RECORDS
+                    flush_records(range.x + idx, a, b, c, tail, g_col, sg_lane);
+#else
                     if SG == 8u {   // constant after inlining
                         flush_scattered8(sid, a, b, c, tail, g_col, sg_lane);
                     } else {
                         flush_butterfly(sid, a, b, c, q.v_nd, g_col, sg_lane);
                     }
+#endif
                 }
             }
         }

@@ -2,6 +2,7 @@
 // searches (lower bounds of the tile and of the next one) over the `count` sorted tile ids. Every tile
 // is written, empty ones as [x, x). (Before, one thread per intersection compared it with its
 // neighbours: 224k threads for the standard scene's 1024 tiles, and the ranges had to be cleared first.)
+// Define RECORD_KEYS: the keys carry more than the tile id (emit_isects.wgsl); only the tile id counts.
 #include "common/render_types.wgsl"
 
 @group(0) @binding(0) var<storage, read> elem_info: DispatchInfo;
@@ -15,7 +16,11 @@ fn lower_bound(tile: u32, count: u32) -> u32 {
     var hi = count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
+#if RECORD_KEYS
+        let below = (isect_tiles[mid] & TILE_KEY_MASK) < tile;
+#else
         let below = isect_tiles[mid] < tile;
+#endif
         lo = select(lo, mid + 1u, below);
         hi = select(mid, hi, below);
     }
