@@ -41,7 +41,7 @@ class ProjectionState:
     projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
     block_bands: wgpu.GPUBuffer   # [N] vec2<u32>: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
-    colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded
+    colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded (depth in w below 4 channels)
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
     depth_order: wgpu.GPUBuffer   # [N] surfel ids, front to back

@@ -178,9 +178,11 @@ fn project_surfel(i: u32) -> vec2<u32> {
     tile_rects[i] = tiles;
     let nc = params.num_channels;
     let last = nc - 1u;
+    // With fewer than 4 channels the depth rides in the padding lane (the subgroup rasterizer's
+    // DEPTH_IN_COLOR, rasterize_core.wgsl).
     colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
                            select(0.0, colors[i * nc + min(2u, last)], nc > 2u),
-                           select(0.0, colors[i * nc + min(3u, last)], nc > 3u));
+                           select(mu_c.z, colors[i * nc + min(3u, last)], nc > 3u));
     let count = select(countOneBits(tiles.z), extent.x * extent.y, tiles.w != 0u);
     tile_counts[i] = count;
     let key = depth_key(mu_c.z);

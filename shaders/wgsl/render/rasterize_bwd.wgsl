@@ -134,7 +134,8 @@ fn start_replay(pix: vec2<u32>) -> PixelReplay {
     r.T = select(1.0, final_t[p], inside);
     r.last = select(0u, last_index[p], inside);
     // Colours in one vec4 register: any dynamically indexed private array would be placed in per-lane
-    // scratch memory by CPU drivers, making every access in the loop a gather.
+    // scratch memory by CPU drivers, making every access in the loop a gather. Below 4 channels colors4.w
+    // holds the depth (DEPTH_IN_COLOR), which v_col.w = 0 cancels.
     r.v_col = select(vec4<f32>(0.0), upstream_color4(p), inside);
     r.acc_col = r.T * background4();
     r.v_a = select(0.0, v_out_alpha[p], inside);
