@@ -206,3 +206,38 @@ def test_public_render_under_no_grad_keeps_no_replay_state(gpu, monkeypatch):
     assert replays == [False, True]
     assert quiet.color.grad_fn is None and graded.color.grad_fn is not None
     assert torch.equal(quiet.color, graded.color.detach())
+
+
+def test_forward_sized_by_earlier_renders_runs_again_when_they_fall_short(gpu):
+    """forward sizes the part after projection by what earlier renders needed (intersection capacity,
+    depth-sort key bits) and runs it again with exact sizes when a render needs more: a first render
+    and then a scene with more intersections and a wider depth range match a rasterizer that had
+    already seen them, bit for bit, and the hints only grow."""
+    from gma.render import read_outputs
+
+    def buffers_of(scene):
+        return SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in ("means", "quats", "scales",
+                                                                            "opacities", "colors")))
+
+    cam = default_camera(80, 64)
+    flat = torch_scene(200, seed=3)
+    flat["means"][:, 2] = flat["means"][:, 2] * 1e-3 + 3.0   # nearly one depth: few key bits
+    flat, dense = buffers_of(flat), buffers_of(torch_scene(3000, seed=4))
+    warm = SurfelRasterizer(gpu)
+    for b in (flat, dense):
+        warm.forward(b, cam)
+    fresh = SurfelRasterizer(gpu)
+    fresh.isect_capacity_hint = 16
+    most, bits_seen = 16, []
+    for b in (flat, dense, flat):
+        bits = fresh.depth_bits_hint
+        state = fresh.forward(b, cam)
+        bits_seen.append(fresh.depth_bits_hint)
+        most = max(most, state.num_isects)
+        assert fresh.isect_capacity_hint == most and fresh.depth_bits_hint >= bits
+        got, want = read_outputs(gpu, state), read_outputs(gpu, warm.forward(b, cam))
+        for name in ("color", "alpha", "normal", "depth"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
+    assert most > 4 * 200, "the dense scene should need more intersections than the first render"
+    assert bits_seen[1] > bits_seen[0], "the dense scene should need more depth-key bits"
+    assert fresh.depth_bits_hint == warm.depth_bits_hint > 1

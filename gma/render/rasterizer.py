@@ -1,9 +1,9 @@
 """The forward surfel rasterizer: projection, depth sort, tile binning, tile sort, tiled compositing.
 
-Every pass runs on the GPU; the only host round trip in :meth:`SurfelRasterizer.forward` is reading, after
-projection, the number of tile intersections (so that the intersection buffers are sized exactly) and
-the range of the depth keys (so that the depth sort runs only the radix passes that range needs). The texture path
-(:meth:`render_to_texture`) avoids even that by using a capacity that grows from earlier frames.
+Every pass runs on the GPU. :meth:`SurfelRasterizer.forward` sizes the intersection lists and the depth
+sort's radix passes by what earlier renders needed, checks projection's counts after the render and runs
+the part after projection again, exactly sized, when a render needed more. The texture path
+(:meth:`render_to_texture`) reads nothing back, using a capacity that grows from earlier frames.
 """
 
 from __future__ import annotations
@@ -107,6 +107,7 @@ class SurfelRasterizer:
         self.sorter = RadixSorter(ctx, self.workspace)
         self.scan = ExclusiveScan(ctx, self.workspace)
         self.isect_capacity_hint = 1 << 16
+        self.depth_bits_hint = 1   # key bits the depth sort orders (forward)
         self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
         # Projection's frame stats by subgroup reductions (tests switch this off to exercise the
         # workgroup-atomics variant that adapters without subgroups run; see project_fwd.wgsl).
@@ -292,17 +293,20 @@ class SurfelRasterizer:
         scene, 100k surfels, lavapipe, interleaved: 1.055x and 1.088x faster in two runs);
         :meth:`backward` refuses such a state.
 
-        Two submissions: projection, then (after reading the intersection count and the depth keys'
-        range, the one host round trip) depth sort, scan, binning, tile sort and rasterization into
-        exactly sized buffers."""
+        Two submissions, no host round trip between them: projection, then, encoded while the GPU
+        projects, depth sort, scan, binning, tile sort and rasterization, sized by what earlier renders
+        needed (the intersection capacity and the depth sort's key bits, :func:`depth_key_bits`). Then
+        it reads projection's counts: when this render needed more, the part after projection runs
+        again with exact sizes (the first render, or a larger scene) and the hints grow. (Reading them
+        between the submissions left the GPU idle while the second part was encoded: standard scene,
+        100k surfels, lavapipe, ~4 ms of ~110.)"""
         ctx, n, c = self.ctx, surfels.count, surfels.channels
         bg = np.zeros(c, np.float32) if background is None else np.asarray(background, np.float32)
+        capacity, key_bits = self.isect_capacity_hint, self.depth_bits_hint
         enc = ctx.device.create_command_encoder()
-        st = self.project(enc, surfels, camera, 0, timer, keep=replay)
+        st = self.project(enc, surfels, camera, capacity, timer, keep=replay)
         ctx.submit(enc)
-        stats = ctx.read(st.stats, np.uint32, 4) if n else np.zeros(4, np.uint32)
-        num_isects = int(stats[1])
-        ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
+        timed_projection = list(timer.names) if timer else []
         hw = camera.width * camera.height
         def image(label, nbytes):  # kept for the backward pass, or scratch that the next render reuses
             return ctx.buffer(nbytes, label) if replay else self.workspace.get(label, nbytes)
@@ -311,16 +315,34 @@ class SurfelRasterizer:
                   image("out.depth", 4 * hw)]
         replayed = [ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")] if replay else []
         background_buf = ctx.upload(bg, "background")
-        enc = ctx.device.create_command_encoder()
-        self.depth_order(enc, st, n, depth_key_bits(stats), timer)
-        isect_ids, ranges, records = self.bin_and_rasterize(enc, surfels, camera, st, num_isects, background_buf,
-                                                            images + replayed, timer)
-        if timer:
-            timer.resolve(enc)
-        ctx.submit(enc)
+        lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
+                                         images + replayed, timer)
+        stats = ctx.read(st.stats, np.uint32, 4) if n else np.zeros(4, np.uint32)
+        num_isects, needed_bits = int(stats[1]), depth_key_bits(stats)
+        # Exact from here on: the backward's passes bound the intersection lists by it.
+        ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
+        if num_isects > capacity or needed_bits > key_bits:
+            if timer:  # report the passes that ran last
+                timer.names = timed_projection
+            lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
+                                             images + replayed, timer)
+        # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
+        self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
+        isect_ids, ranges, records = lists
         return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
                             *(replayed or (None, None)), records=records)
+
+    def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
+        """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
+        ``key_bits``, then binning into lists of ``capacity`` intersections and rasterization."""
+        enc = self.ctx.device.create_command_encoder()
+        self.depth_order(enc, st, surfels.count, key_bits, timer)
+        lists = self.bin_and_rasterize(enc, surfels, camera, st, capacity, background_buf, targets, timer)
+        if timer:
+            timer.resolve(enc)
+        self.ctx.submit(enc)
+        return lists
 
     def backward(self, state: ForwardState, surfels: SurfelBuffers, v_color: np.ndarray | None,
                  v_alpha: np.ndarray | None, v_normal: np.ndarray | None, v_depth: np.ndarray | None,
