@@ -382,18 +382,23 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let n = num_hits - hh - h0;
             let mine_slot = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
             let mine_id = isect_ids[range.x + start + mine_slot];
-            let mine = projected[mine_id];
+            // Field by field: the normal and depth are read only when their gradients are wanted (against
+            // one load of the whole surfel, standard scene, 100k surfels, lavapipe, nine alternating runs:
+            // the backward's GPU time per forward rasterize pass lower in eight, by ~3 %).
+            let mine_t0 = projected[mine_id].t0;
+            let mine_t1 = projected[mine_id].t1;
+            let mine_t2 = projected[mine_id].t2;
             let mine_col = colors4[mine_id];
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
                 let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
 #if NORMAL_DEPTH_GRADS
-                let nd = subgroupShuffle(mine.normal_depth, k);
+                let nd = subgroupShuffle(projected[mine_id].normal_depth, k);
 #else
                 let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
 #endif
-                let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                                        subgroupShuffle(mine.t2, k), nd);
+                let s = ProjectedSurfel(subgroupShuffle(mine_t0, k), subgroupShuffle(mine_t1, k),
+                                        subgroupShuffle(mine_t2, k), nd);
                 let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
