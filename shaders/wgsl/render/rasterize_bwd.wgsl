@@ -193,11 +193,10 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 #if GRAD_RECORDS
 // Gradient records: one per intersection, at its place in the tile-sorted list, RECORD_VEC2S vec2s
 // each, zeroed before the pass and summed per surfel by project_bwd.wgsl (record_slots.wgsl lists each
-// surfel's records). Every subgroup of the tile's workgroup that
-// the surfel reaches adds its totals to the record with plain loads and stores: no other workgroup
-// touches it, and lavapipe runs a workgroup's subgroups one after another on one thread, switching
-// only at barriers (there are none between a flush's load and store), while a subgroup's lanes own
-// distinct elements. Hence only on lavapipe (SurfelRasterizer.use_grad_records). Against a float
+// surfel's records). Every subgroup of the tile's workgroup that the surfel reaches adds its totals to
+// the record with plain loads and stores: no other workgroup touches it, and lavapipe runs a
+// workgroup's subgroups one after another on one thread, switching only at barriers (there are none
+// between a flush's load and store), while a subgroup's lanes own distinct elements. Hence only on lavapipe (SurfelRasterizer.use_grad_records). Against a float
 // atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about a third of this
 // pass) and with each lane's two totals adjacent (one vec2 load and store per lane instead of two
 // scalar atomics): standard scene, 100k surfels, same runs, this pass 92.6-94.3 against 115.0-117.0 ms,
