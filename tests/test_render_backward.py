@@ -107,8 +107,8 @@ def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
         return images, {k: getattr(g, k) for k in NAMES}
 
     images, first = run(True)
-    lists = rast.forward(buffers, cam).num_isects
-    assert lists > 3 * 3000 // 2, "the scene should spread surfels over several tiles each"
+    num_isects = rast.forward(buffers, cam).num_isects
+    assert num_isects > 3 * 3000 // 2, "the scene should spread surfels over several tiles each"
     for _ in range(3):
         _, again = run(True)
         for k in NAMES:

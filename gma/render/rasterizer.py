@@ -82,6 +82,12 @@ class ForwardState:
     records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
 
 
+def _record_bytes(num_isects: int, normal_depth: bool) -> int:
+    """Bytes of a backward pass's gradient records (flush_records in rasterize_bwd.wgsl): per
+    intersection 16 values, and with normal/depth gradients 4 colours after them."""
+    return 4 * (20 if normal_depth else 16) * max(num_isects, 1)
+
+
 def _bits_for(count: int) -> int:
     return max(1, math.ceil(math.log2(max(count, 2))))
 
@@ -150,9 +156,9 @@ class SurfelRasterizer:
         """Whether a replayed render keeps the index for gradient records: the lavapipe subgroup
         variant, tile ids that fit below RECORD_KEY_SHIFT, and records that fit one buffer binding."""
         tx, ty = tile_grid(camera.width, camera.height)
-        record_bytes = 4 * (16 + 4) * max(num_isects, 1)
+        largest = _record_bytes(num_isects, normal_depth=True)
         return (self.use_grad_records and self.raster_defines(channels)["USE_SUBGROUPS"]
-                and tx * ty <= 1 << RECORD_KEY_SHIFT and record_bytes <= self.ctx.max_binding_bytes
+                and tx * ty <= 1 << RECORD_KEY_SHIFT and largest <= self.ctx.max_binding_bytes
                 and num_isects <= MAX_WORKGROUPS * 256)  # record_slots.wgsl: one thread per intersection
 
     # -- passes -------------------------------------------------------------------------------------
@@ -417,10 +423,9 @@ class SurfelRasterizer:
                            colors.reshape(n, c))
 
     def _cleared_records(self, enc, num_isects: int, normal_depth: bool) -> wgpu.GPUBuffer:
-        """Zeroed gradient records (flush_records in rasterize_bwd.wgsl): per intersection 16 values,
-        with normal/depth gradients 4 colours after them. Scratch: backward reads the gradients back
-        before it returns (a fresh buffer per call cost lavapipe page faults and wgpu's zero-fill)."""
-        nbytes = 4 * (20 if normal_depth else 16) * max(num_isects, 1)
+        """Zeroed gradient records (flush_records in rasterize_bwd.wgsl). Scratch: backward reads the
+        gradients back before it returns."""
+        nbytes = _record_bytes(num_isects, normal_depth)
         records = self.workspace.get("grad_records", nbytes)
         enc.clear_buffer(records, 0, nbytes)
         return records
