@@ -361,8 +361,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let count = replay_count(range, lid, last);
     let num_batches = ceil_div(count, BATCH);
     let tile_px = pix % TILE_SIZE;
-    let my_blocks = subgroupOr(quad_blocks(tile_px));
-    let block_last = subgroupMax(last);
+    let my_blocks = lanes_or(quad_blocks(tile_px));
+    let block_last = lanes_max(last);
     let row = sg_id * (BATCH + SG);
     for (var bi = 0u; bi < num_batches; bi++) {
         let b = num_batches - 1u - bi;
@@ -411,7 +411,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                           + replay_hit(quad_alpha(s, ca, 1u), 1u, nd, col, idx, &pb, &q, &hit_b)
                           + replay_hit(quad_alpha(s, ca, 2u), 2u, nd, col, idx, &pc, &q, &hit_c)
                           + replay_hit(quad_alpha(s, ca, 3u), 3u, nd, col, idx, &pd, &q, &hit_d);
-                if subgroupAny(hit_a || hit_b || hit_c || hit_d) {
+                if any_lane(hit_a || hit_b || hit_c || hit_d) {
                     // d/dT of the four pixels at once. Per pixel (p = h_u x h_v): d/dh_u = h_v x v_p,
                     // d/dh_v = v_p x h_u, and T0 -= d/dh_u, T1 -= d/dh_v, T2 += px.x d/dh_u + px.y d/dh_v.
                     // h_u is common and h_v = h_v0 + dy T2, so the sums over the pixels need only the
