@@ -17,3 +17,11 @@ fn quat_to_mat3(q_in: vec4<f32>) -> mat3x3<f32> {
 fn ceil_div(a: u32, b: u32) -> u32 {
     return (a + b - 1u) / b;
 }
+
+// u32(x) for a whole number x in [0, 2^23) (a pixel coordinate), from the float's bits: adding 2^23
+// puts x in the mantissa exactly. Lavapipe runs u32() of a float, which must saturate, as a scalar
+// loop over the lanes (projection's conversions this way: standard scene, lavapipe, both in one process,
+// interleaved, 22 rounds: projection 0.84x, images bit-identical).
+fn whole_u32(x: f32) -> u32 {
+    return bitcast<u32>(x + 8388608.0) - 0x4B000000u;
+}

@@ -167,13 +167,15 @@ fn project_surfel(i: u32) -> vec2<u32> {
         cull(i);
         return vec2<u32>(CULLED_KEY, 0u);
     }
-    let tile_lo = vec2<u32>(p_lo) / TILE_SIZE;
-    let tile_hi = vec2<u32>(p_hi) / TILE_SIZE;
+    let px_lo = vec2<u32>(whole_u32(p_lo.x), whole_u32(p_lo.y));   // the box's pixels, as integers
+    let px_hi = vec2<u32>(whole_u32(p_hi.x), whole_u32(p_hi.y));
+    let tile_lo = px_lo / TILE_SIZE;
+    let tile_hi = px_hi / TILE_SIZE;
     let extent = tile_hi - tile_lo + 1u;
 
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
-    let bands = write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi);
+    let bands = write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi, px_lo, px_hi);
     let tiles = tile_list(bands, tile_lo, tile_hi);
     tile_rects[i] = tiles;
     let nc = params.num_channels;
@@ -255,11 +257,12 @@ fn band_range(f: BlockShape, mu: vec2<f32>, y0: f32, margin: f32) -> vec2<f32> {
 // 10 j) the first and last column, relative to the box's first, of the pixels whose centres band_range
 // covers within the box (first 31, last 0 when empty); for BIG, the box's last column, for every band.
 // Returns what it wrote.
-fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>) -> vec2<u32> {
-    let first = u32(p_lo.y) / 8u;
-    let nb = u32(p_hi.y) / 8u - first + 1u;
-    let col0 = u32(p_lo.x) / 4u;
-    let col1 = u32(p_hi.x) / 4u;
+fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2<f32>, px_lo: vec2<u32>,
+               px_hi: vec2<u32>) -> vec2<u32> {
+    let first = px_lo.y / 8u;
+    let nb = px_hi.y / 8u - first + 1u;
+    let col0 = px_lo.x / 4u;
+    let col1 = px_hi.x / 4u;
     if nb > 3u || col1 - col0 > 31u {
         let box = vec2<u32>(first | (col0 << 15u), col1);
         block_bands[i] = box;
@@ -270,10 +273,11 @@ fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2
     for (var j = 0u; j < nb; j++) {
         let r = band_range(f, mu, f32(8u * (first + j)) + 0.5, margin);
         // Pixels whose centres p + 0.5 lie in [lo, hi], within the box.
-        let px_lo = max(ceil(r.x - 0.5), p_lo.x);
-        let px_hi = min(floor(r.y - 0.5), p_hi.x);
-        let c = vec2<u32>(u32(max(px_lo, 0.0)) / 4u, u32(max(px_hi, 0.0)) / 4u) - col0;
-        cols |= select(31u, c.x | (c.y << 5u), px_lo <= px_hi) << (10u * j);
+        let x_lo = max(ceil(r.x - 0.5), p_lo.x);
+        let x_hi = min(floor(r.y - 0.5), p_hi.x);
+        // Whole numbers within the box (p_lo.x >= 0) when the range is not empty; clamped otherwise.
+        let c = vec2<u32>(whole_u32(clamp(x_lo, 0.0, p_hi.x)) / 4u, whole_u32(clamp(x_hi, 0.0, p_hi.x)) / 4u) - col0;
+        cols |= select(31u, c.x | (c.y << 5u), x_lo <= x_hi) << (10u * j);
     }
     let bands = vec2<u32>(first | (nb << 13u) | (col0 << 15u), cols);
     block_bands[i] = bands;
