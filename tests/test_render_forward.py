@@ -126,6 +126,49 @@ def test_plain_and_subgroup_variants_agree(gpu):
         np.testing.assert_allclose(getattr(outs[0], name), getattr(outs[1], name), atol=1e-5)
 
 
+def test_intersection_block_masks_cover_every_reached_block(gpu):
+    """The subgroup rasterizers skip a 4x2 pixel block of a tile where an intersection's block mask
+    (isect_masks.wgsl) has no bit: every block where the reference alpha of the surfel reaches 1/255 at
+    some pixel centre must have its bit, and the masks must leave blocks out (else they prove nothing)."""
+    if not gpu.has_subgroups:
+        pytest.skip("adapter has no subgroups")
+    from gma.render.reference import project_reference, surfel_alpha_reference
+
+    scene = special_surfels()
+    more = torch_scene(300, seed=5)
+    scene = {k: torch.cat([scene[k], more[k]]) for k in scene}
+    cam = default_camera(80, 56)
+    rast = SurfelRasterizer(gpu)
+    rast.use_subgroups = True
+    arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
+    st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
+    tx, ty = (cam.width + 15) // 16, (cam.height + 15) // 16
+    ids, masks = (gpu.read(b, np.uint32, st.num_isects) for b in (st.isect_ids, st.isect_masks))
+    ranges = gpu.read(st.tile_ranges, np.uint32, 2 * tx * ty).reshape(-1, 2)
+    T, mu2d, _, _, _ = project_reference(scene["means"], scene["quats"], scene["scales"], scene["opacities"],
+                                         torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K))
+    ys, xs = np.mgrid[0:16, 0:16]
+    block_bits = (1 << ((ys // 2) * 4 + xs // 4)).reshape(-1)
+    left_out = 0
+    for tile, (lo, hi) in enumerate(ranges):
+        if lo == hi:
+            continue
+        px = np.stack([xs.reshape(-1) + 16 * (tile % tx), ys.reshape(-1) + 16 * (tile // tx)], -1)
+        inside = (px[:, 0] < cam.width) & (px[:, 1] < cam.height)
+        sids = ids[lo:hi].astype(np.int64)
+        alpha = surfel_alpha_reference(T[sids], mu2d[sids], scene["opacities"][sids],
+                                       torch.from_numpy(px + 0.5).float()).numpy()   # [256, k]
+        # A small margin keeps pixels whose alpha is 1/255 to within rounding out of the check.
+        reached = (alpha >= 1.0 / 255.0 * 1.001) & inside[:, None]
+        needed = np.bitwise_or.reduce(np.where(reached, block_bits[:, None], 0), axis=0)
+        got = masks[lo:hi]
+        missing = needed & ~got
+        assert not missing.any(), f"tile {tile}: blocks {missing[missing != 0]} reached but not in the masks"
+        assert (got != 0).all(), f"tile {tile}: a listed intersection with an empty mask"
+        left_out += int((got != 0xFFFFFFFF).sum())
+    assert left_out > 0
+
+
 def test_projection_stats_variants_agree(gpu):
     """Projection's frame stats (intersections wanted, smallest and largest listed depth key) are the
     same from subgroup reductions and from workgroup atomics, and match the tile counts it wrote."""

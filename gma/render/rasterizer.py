@@ -80,6 +80,7 @@ class ForwardState:
     final_t: wgpu.GPUBuffer | None  # [H, W] (None: rendered with replay=False)
     last: wgpu.GPUBuffer | None     # [H, W] contributors per pixel (u32)
     records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
+    isect_masks: wgpu.GPUBuffer | None = None  # subgroup variant: tile-sorted block masks (isect_masks.wgsl)
 
 
 def _record_bytes(num_isects: int, normal_depth: bool) -> int:
@@ -173,13 +174,13 @@ class SurfelRasterizer:
         cp.end()
 
     @staticmethod
-    def _subgroup_staging(resources: dict, st: ProjectionState | None, empty=None) -> None:
-        """The subgroup rasterizers (forward and backward) stage what projection wrote for them — block
-        bands and colours padded to a vec4 (see rasterize_core.wgsl) — instead of the colours at binding
-        2, which they do not declare. ``st`` None (no surfels): ``empty`` stands in."""
+    def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer, isect_masks: wgpu.GPUBuffer) -> None:
+        """The subgroup rasterizers (forward and backward) read the intersections' block masks
+        (isect_masks.wgsl) and the colours padded to a vec4 that projection wrote (see
+        rasterize_core.wgsl) instead of the colours at binding 2, which they do not declare."""
         del resources[2]
-        resources[14] = st.block_bands if st else empty
-        resources[15] = st.colors4 if st else empty
+        resources[14] = isect_masks
+        resources[15] = colors4
 
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
                 timer: PassTimer | None = None, keep: bool = True) -> ProjectionState:
@@ -202,7 +203,7 @@ class SurfelRasterizer:
             params=kept("params", params.nbytes, UNIFORM),
             projected=kept("projected", 64 * n),
             tile_rects=scratch("tile_rects", 16 * n),
-            block_bands=kept("block_bands", 8 * n),
+            block_bands=scratch("block_bands", 8 * n),
             colors4=kept("colors4", 16 * n),
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),
@@ -245,8 +246,9 @@ class SurfelRasterizer:
         """Encode intersection emission, the tile sort, tile ranges and the rasterizer. ``target`` is a
         list of output buffers (buffer variant: colour, alpha, normal, depth, and for a render the backward
         pass will replay, the final transmittance and contributor count) or a GPUTextureView (texture
-        variant, never replayed). Returns the tile-sorted surfel ids, the tile ranges and, for a replayed
-        render whose backward will sum gradient records (:meth:`_records_for`), their :class:`RecordIndex`."""
+        variant, never replayed). Returns the tile-sorted surfel ids, the tile ranges, for a replayed
+        render whose backward will sum gradient records (:meth:`_records_for`) their :class:`RecordIndex`,
+        and for the subgroup variant the intersections' block masks (else None)."""
         ctx, n = self.ctx, surfels.count
         tx, ty = tile_grid(camera.width, camera.height)
         cap = max(capacity, 1)
@@ -263,6 +265,12 @@ class SurfelRasterizer:
                 records = RecordIndex(ctx.buffer(4 * cap, "isect_keys"), ctx.buffer(4 * max(n, 1), "record_base"))
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
+        defines = self.raster_defines(surfels.channels)
+        subgroups = defines["USE_SUBGROUPS"]
+        empty = self.workspace.get("empty", 64)
+        masks = None
+        if subgroups:
+            masks = ctx.buffer(4 * cap, "isect_masks") if replay else self.workspace.get("isect_masks", 4 * cap)
         if n > 0:
             self._setup(encoder, st, timer)
             emit = ctx.compute_pipeline("render/emit_isects.wgsl", keyed)
@@ -273,10 +281,12 @@ class SurfelRasterizer:
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
+            if subgroups:
+                mask_pass = ctx.compute_pipeline("render/isect_masks.wgsl", keyed)
+                self._dispatch(encoder, mask_pass, [st.elem_info, isect_tiles, isect_ids, st.block_bands, st.params,
+                                                    masks], st.elem_info, "bin", timer)
         else:
             encoder.clear_buffer(ranges)  # every tile is empty
-        defines = self.raster_defines(surfels.channels)
-        empty = self.workspace.get("empty", 64)
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
         if isinstance(target, wgpu.GPUTextureView):
             raster = ctx.compute_pipeline("render/rasterize_texture.wgsl", defines)
@@ -284,10 +294,10 @@ class SurfelRasterizer:
         else:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay})
             resources = dict(enumerate(inputs + list(target)))
-        if defines["USE_SUBGROUPS"]:
-            self._subgroup_staging(resources, st if n else None, empty)
+        if subgroups:
+            self._subgroup_inputs(resources, st.colors4 if n else empty, masks)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
-        return isect_ids, ranges, records
+        return isect_ids, ranges, records, masks
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
@@ -335,9 +345,9 @@ class SurfelRasterizer:
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
-        isect_ids, ranges, records = lists
+        isect_ids, ranges, records, masks = lists
         return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
-                            *(replayed or (None, None)), records=records)
+                            *(replayed or (None, None)), records=records, isect_masks=masks)
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
@@ -397,7 +407,7 @@ class SurfelRasterizer:
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         colors_out = color_in_proj or records is not None
         if defines["USE_SUBGROUPS"]:
-            self._subgroup_staging(resources, state.proj)
+            self._subgroup_inputs(resources, state.proj.colors4, state.isect_masks)
         if colors_out:
             resources.pop(13, None)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)

@@ -73,7 +73,6 @@ fn flush(sid: u32, g: SurfelGrad) {
 
 #if !USE_SUBGROUPS
 var<workgroup> batch_ids: array<u32, BATCH>;
-#endif
 var<workgroup> tile_last: atomic<u32>;
 
 // Intersections of the tile (`range`) to replay: up to the furthest last contributor of any of its
@@ -87,6 +86,7 @@ fn replay_count(range: vec2<u32>, lid: u32, last: u32) -> u32 {
     atomicMax(&tile_last, last);
     return min(range.y - range.x, workgroupUniformLoad(&tile_last));
 }
+#endif
 
 // Up to 4 channels as a zero-padded vec4 (no private arrays; see the subgroup path below).
 fn upstream_color4(p: u32) -> vec4<f32> {
@@ -358,24 +358,19 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let last = max(max(pa.last, pb.last), max(pc.last, pd.last));
 
     let range = ranges[tile];
-    let count = replay_count(range, lid, last);
-    let num_batches = ceil_div(count, BATCH);
     let tile_px = pix % TILE_SIZE;
     let my_blocks = lanes_or(quad_blocks(tile_px));
-    let block_last = lanes_max(last);
+    // Each subgroup replays the intersections before its furthest last contributor on its own, with no
+    // barriers (see composite_quad in rasterize_core.wgsl, which also explains the hit list).
+    let count = min(range.y - range.x, lanes_max(last));
+    let num_batches = ceil_div(count, BATCH);
     let row = sg_id * (BATCH + SG);
     for (var bi = 0u; bi < num_batches; bi++) {
         let b = num_batches - 1u - bi;
         let start = b * BATCH;   // local index of the batch's first intersection
-        workgroupBarrier();
         let m = min(BATCH, count - start);
-        for (var slot = lid; slot < m; slot += RASTER_THREADS) {
-            batch_blocks[slot] = block_mask(isect_ids[range.x + start + slot], tile);
-        }
-        workgroupBarrier();
-        // Surfels pass between lanes by shuffles (see rasterize_core.wgsl, which also explains the hit
-        // list). Only slots before the subgroup's furthest last contributor matter.
-        let num_hits = list_hits(m, my_blocks, select(0u, block_last - start, block_last > start), row, sg_lane);
+        // Surfels pass between lanes by shuffles.
+        let num_hits = list_hits(range.x + start, m, my_blocks, row, sg_lane);
         for (var hh = 0u; hh < num_hits; hh += SG) {
             let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
             let n = num_hits - hh - h0;

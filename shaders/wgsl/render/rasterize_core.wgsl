@@ -1,6 +1,7 @@
 // Tiled front-to-back compositing shared by the buffer and texture variants of the forward rasterizer.
-// One workgroup per 16x16 tile, one thread per pixel (four in the subgroup variant). Surfels are
-// staged BATCH at a time in workgroup memory; the tile stops early once every pixel is saturated.
+// One workgroup per 16x16 tile, one thread per pixel (four in the subgroup variant). The plain variant
+// stages surfels BATCH at a time in workgroup memory and the tile stops early once every pixel is
+// saturated; the subgroup variant's subgroups each walk the list on their own (see composite_quad).
 // Defines: CHANNELS, BATCH, USE_SUBGROUPS and SG (the subgroup size) for the subgroup variant.
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
@@ -14,12 +15,13 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(14) var<storage, read> block_bands: array<vec2<u32>>;     // [N] see write_bands in project_fwd.wgsl
+// Per intersection (list order): the tile's 4x2 pixel blocks its surfel can reach (isect_masks.wgsl).
+@group(0) @binding(14) var<storage, read> isect_masks: array<u32>;
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR)
-// Per staged surfel: which 4x2 pixel blocks of the tile its footprint can reach (bit by*4 + bx, see block_mask).
-var<workgroup> batch_blocks: array<u32, BATCH>;
-// Per subgroup (row sg_id * (BATCH + SG)): the batch slots whose block mask meets the subgroup's blocks,
-// then up to SG - 1 entries of scratch (see list_hits).
+// Per subgroup (row sg_id * (BATCH + SG)): the batch's intersections whose block mask meets the
+// subgroup's blocks, then up to SG - 1 entries of scratch (see list_hits). Only the subgroup's own lanes
+// write and read its row, with no barrier between: a CPU driver runs a subgroup as one SIMD thread, in
+// program order (this variant serves CPU drivers only).
 var<workgroup> hit_slots: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 
 // Votes, ballots and reductions over the subgroup from xor-shuffles. Lavapipe runs subgroupBallot,
@@ -63,19 +65,19 @@ fn all_lanes(pred: bool) -> bool {
     return subgroupBroadcast(lanes_or(u32(!pred)), 0u) == 0u;
 }
 
-// Write, in slot order, the slots among the first `m` staged ones that touch `blocks` and lie before
-// `limit` into hit_slots[row..]; returns their number (uniform over the subgroup). Every lane stores,
+// Write, in slot order, the slots among the `m` intersections from list index `start` whose block masks
+// meet `blocks` into hit_slots[row..]; returns their number (the same in every lane). Every lane stores,
 // the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
 // divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
 // the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
 // -8 to -10 %, backward -2 to -5 %). Tried and no faster: per-subgroup hit bitsets built while staging
 // (ballots or xor-shuffles) so that listing reads a word per SG slots at a uniform address; the build
 // cost what the gathers saved.
-fn list_hits(m: u32, blocks: u32, limit: u32, row: u32, sg_lane: u32) -> u32 {
+fn list_hits(start: u32, m: u32, blocks: u32, row: u32, sg_lane: u32) -> u32 {
     var count = 0u;
     for (var j = 0u; j < m; j += SG) {
         let slot = j + sg_lane;
-        let hit = slot < min(m, limit) && (batch_blocks[min(slot, m - 1u)] & blocks) != 0u;
+        let hit = slot < m && (isect_masks[start + min(slot, m - 1u)] & blocks) != 0u;
         let hits = lanes_ballot(hit, sg_lane);
         let below = countOneBits(hits & ((1u << sg_lane) - 1u));
         let total = countOneBits(hits);
@@ -91,8 +93,8 @@ const CHUNKS: u32 = (CHANNELS + 3u) / 4u;
 #if !USE_SUBGROUPS
 var<workgroup> batch_surf: array<ProjectedSurfel, BATCH>;
 var<workgroup> batch_color: array<vec4<f32>, BATCH * CHUNKS>;
-#endif
 var<workgroup> done_count: atomic<u32>;
+#endif
 
 struct PixelResult {
     color: array<vec4<f32>, CHUNKS>,  // without background; channel c is color[c / 4][c % 4]
@@ -168,39 +170,6 @@ fn block_bit(p: vec2<u32>) -> u32 {
     return 1u << ((p.y >> 1u) * 4u + (p.x >> 2u));
 }
 
-#if USE_SUBGROUPS
-// The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
-// (absolute 8-row band) of a surfel with block bands `w` (see write_bands in project_fwd.wgsl).
-fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {
-    let j = band - (w.x & 0x1fffu);   // wraps above the first band
-    let nb = (w.x >> 13u) & 3u;
-    let col0 = i32(w.x >> 15u) - i32(tcol);
-    let bits = w.y >> (10u * min(j, 2u));
-    let lo = max(col0 + select(i32(bits & 31u), 0, nb == 0u), 0);
-    let hi = min(select(col0 + i32((bits >> 5u) & 31u), i32(w.y) - i32(tcol), nb == 0u), 3);
-    let cols = ((2u << u32(max(hi, 0))) - 1u) & ~((1u << u32(min(lo, 3))) - 1u);
-    return select(0u, cols, (nb == 0u || j < nb) && lo <= hi);
-}
-
-// Blocks of tile `tile` (see block_bit) where surfel `sid` can reach alpha >= 1/255 at some pixel centre:
-// the columns of the tile's two 8-row bands (a subgroup's height, so a finer mask would list no fewer
-// hits) that projection computed, each repeated over the band's four block rows. Strictly
-// conservative (see block_shape in project_fwd.wgsl), so a subgroup that the surfel's box reaches but
-// this mask does not sees only alpha < 1/255 from it, which the blend skips anyway: images and
-// gradients are bit-identical to the box's. Standard scene (100k surfels, random orientations):
-// subgroup hit candidates 669k with the box, 551k with bands for every surfel; lavapipe, same runs
-// against the box, two each: forward rasterize -8 to -9 %, backward -6 to -7.5 %, projection +0.3 to
-// +0.5 ms; avatar-like scene (small surfels, no fewer hits): forward -0.5 / +0.8 %, backward -2 / +3 %
-// (noise). Tried: computing the ellipse's columns while staging (32 bytes per surfel read; standard
-// -3 to -5 %, avatar +5 to +8 %); per-band words read from 64 or 16 bytes per surfel (standard -5 to
-// -6 %, avatar +4 to +6 % and +2 to +4 %): the extra bytes per staged surfel miss the cache.
-fn block_mask(sid: u32, tile: u32) -> u32 {
-    let w = block_bands[sid];
-    let band = (tile / params.tile_grid.x) * (TILE_SIZE / 8u);
-    let tcol = (tile % params.tile_grid.x) * (TILE_SIZE / 4u);
-    return (band_columns(w, band, tcol) | (band_columns(w, band + 1u, tcol) << 16u)) * 0x1111u;
-}
-#endif
 
 // Pixel of thread `lid` in its tile. Consecutive threads (a subgroup) cover 4x2 blocks rather than
 // rows, so that small surfels miss whole subgroups more often.
@@ -210,7 +179,7 @@ fn tile_pixel(lid: u32) -> vec2<u32> {
 
 #if !USE_SUBGROUPS
 // Copy surfel `sid` into batch slot `slot` (colours padded to vec4 chunks). The subgroup variant stages
-// block masks only (see composite_quad).
+// nothing (see composite_quad).
 fn stage_surfel(slot: u32, sid: u32) {
     batch_surf[slot] = projected[sid];
     for (var c = 0u; c < CHUNKS; c++) {
@@ -273,20 +242,24 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // (same arithmetic as blend() above). Colours stay in one vec4 register: the driver mishandles
 // shuffles of private-array elements.
 //
-// A batch stages only each intersection's block mask; a lane reads the surfel it passes around (and its
-// colour) from storage, so only surfels that touch the subgroup's block are read, and none is copied
-// through workgroup memory, whose stores lavapipe also runs one lane at a time. (Against staging the
-// surfels and colours as the plain variant does, same runs on lavapipe, interleaved, medians of 5:
-// forward rasterize -12 % on a fitted avatar at 192 px, 37k surfels, where copying had been a third of
-// the pass, and -14 % on the standard scene, 100k surfels; backward -11 % and -13 %. Images and
-// gradients bit-identical.)
+// Each subgroup walks the tile's list on its own, with no barriers: it lists, BATCH intersections at a
+// time, those whose block mask (isect_masks.wgsl, computed once per render) meets its pixels, and a lane
+// reads the surfel it passes around (and its colour) from storage, so only surfels that touch the
+// subgroup's block are read, and none is copied through workgroup memory, whose stores lavapipe runs one
+// lane at a time. (Against staging the surfels and colours as the plain variant does, same runs on
+// lavapipe, interleaved, medians of 5: forward rasterize -12 % on a fitted avatar at 192 px, 37k
+// surfels, and -14 % on the standard scene, 100k surfels; backward -11 % and -13 %.) Lavapipe turns a
+// shader with barriers into a coroutine and keeps every variable a loop carries in the coroutine's frame,
+// writing each through the lane mask (a load, a blend and a store): against the workgroup staging the
+// batches' block masks between barriers, standard scene, alternating runs, this pass 0.75-0.85x and the
+// backward 0.70-0.77x, the mask pass +2.5-3 ms; images and gradients bit-identical.
 //
 // Each thread composites four pixels of one column, ROW_STEP apart, so that a subgroup of 8 covers a
 // 4x8 block (see tile_pixel_quad) and every surfel passed around serves four times as many pixels
 // (standard scene, 100k surfels, this pass on lavapipe: 133 ms with one pixel per thread, 102 with two,
-// 96 with four). A surfel whose footprint (block_mask) misses the subgroup's block is skipped by the whole subgroup at once: the
-// staged surfels that can touch it first go, in order, into its row of hit_slots, and only then is
-// surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
+// 96 with four). A surfel whose footprint (block mask) misses the subgroup's block is skipped by the
+// whole subgroup at once: the intersections that can touch it first go, in order, into its row of
+// hit_slots, and only then is surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
 // least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
 // of ~4x as many steps: standard scene, 100k surfels, forward pass -5 %, backward pass -20 %.)
 // Tried, standard and avatar-like scenes, 100k surfels, same runs against the shuffles: reading each
@@ -430,36 +403,27 @@ fn blend_hit(k: u32, valid: bool, mine: ProjectedSurfel, mine_col: vec4<f32>, mi
 }
 
 // composite_pixel for the four pixels of thread `lid` (first pixel `pix`, global), into *a .. *d.
-fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
+fn composite_quad(tile: u32, pix: vec2<u32>, sg_lane: u32, sg_id: u32,
                   a: ptr<function, PixelBlend>, b: ptr<function, PixelBlend>,
                   c: ptr<function, PixelBlend>, d: ptr<function, PixelBlend>) {
     *a = start_blend(pix);
     *b = start_blend(pix + ROW_STEP);
     *c = start_blend(pix + 2u * ROW_STEP);
     *d = start_blend(pix + 3u * ROW_STEP);
-    if lid == 0u {
-        atomicStore(&done_count, 0u);
-    }
-    workgroupBarrier();
-    atomicAdd(&done_count, u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d)));
     let range = ranges[tile];
-    let num_batches = ceil_div(range.y - range.x, BATCH);
     let tile_px = pix % TILE_SIZE;
     let my_blocks = lanes_or(quad_blocks(tile_px));
     let row = sg_id * (BATCH + SG);
-    for (var bi = 0u; bi < num_batches; bi++) {
-        // Uniform exit: also the barrier that protects the batch buffers from being overwritten early.
-        if workgroupUniformLoad(&done_count) >= TILE_SIZE * TILE_SIZE {
+    // Each subgroup walks the tile's list on its own, BATCH intersections at a time, and stops once its
+    // pixels are saturated: no barriers. (Lavapipe turns a shader with barriers into a coroutine and keeps
+    // every variable a loop carries in the coroutine's frame, written through the lane mask; see the
+    // two-hit steps below.)
+    for (var base = range.x; base < range.y; base += BATCH) {
+        if all_lanes(is_done(*a) && is_done(*b) && is_done(*c) && is_done(*d)) {
             break;
         }
-        let base = range.x + bi * BATCH;
         let m = min(BATCH, range.y - base);
-        for (var slot = lid; slot < m; slot += RASTER_THREADS) {
-            batch_blocks[slot] = block_mask(isect_ids[base + slot], tile);
-        }
-        workgroupBarrier();
-        let was_done = u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d));
-        let num_hits = list_hits(m, my_blocks, m, row, sg_lane);
+        let num_hits = list_hits(base, m, my_blocks, row, sg_lane);
         for (var h = 0u; h < num_hits; h += SG) {
             if all_lanes(is_done(*a) && is_done(*b) && is_done(*c) && is_done(*d)) {
                 break;
@@ -469,14 +433,14 @@ fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
             let mine = projected[mine_sid];
             let mine_col = colors4[mine_sid];
             let n = min(SG, num_hits - h);
-            // Front to back, two hits per step. Lavapipe keeps variables that a loop carries in memory
-            // (in the frame of the coroutine a shader with barriers becomes) and writes each through the
-            // loop's lane mask: a load, a blend and a store per value, 9 values per pixel. Copies made in
-            // the step are plain SSA values, so the pixels' states go through memory once per two hits.
-            // (Standard scene, 100k surfels, lavapipe, alternating runs: this pass 64.0 / 67.7 / 64.2 /
-            // 64.5 against 74.8 / 72.2 / 80.1 / 70.3 ms, images bit-identical; four hits per step
-            // spilled registers: 82.4 / 88.6 ms. The backward's replay, whose flush follows every hit,
-            // was slower two per step: 98.5 / 108.6 against 88.5 / 96.7 ms.)
+            // Front to back, two hits per step: lavapipe writes a variable that a loop carries through the
+            // loop's lane mask, 9 values per pixel, and copies made in the step are plain values, so
+            // the pixels' states take those writes once per two hits. (Standard scene, 100k surfels,
+            // lavapipe: when this pass still had barriers, which put those variables in memory, 64.0-67.7
+            // against 70.3-80.1 ms in alternating runs; without barriers, one hit per step 1.10x slower
+            // in one process, interleaved; four hits per step spilled registers: 82-89 ms. Images
+            // bit-identical. The backward's replay, whose flush follows every hit, is slower two per
+            // step: 1.055x.)
             for (var k = 0u; k < n; k += 2u) {
                 var sa = (*a).state;
                 var sb = (*b).state;
@@ -494,10 +458,6 @@ fn composite_quad(tile: u32, pix: vec2<u32>, lid: u32, sg_lane: u32, sg_id: u32,
         end_batch(b);
         end_batch(c);
         end_batch(d);
-        let now_done = u32(is_done(*a)) + u32(is_done(*b)) + u32(is_done(*c)) + u32(is_done(*d));
-        if now_done != was_done {
-            atomicAdd(&done_count, now_done - was_done);
-        }
     }
 }
 #endif

@@ -11,7 +11,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var b: PixelBlend;
     var c: PixelBlend;
     var d: PixelBlend;
-    composite_quad(wg.y * params.tile_grid.x + wg.x, pix, lid, sg_lane, sg_id, &a, &b, &c, &d);
+    composite_quad(wg.y * params.tile_grid.x + wg.x, pix, sg_lane, sg_id, &a, &b, &c, &d);
     write_pixel(pix, a.result);
     write_pixel(pix + ROW_STEP, b.result);
     write_pixel(pix + 2u * ROW_STEP, c.result);
