@@ -39,7 +39,8 @@ def test_radix_sort_block_geometry(gpu):
     from gma.render.gpu_sort import CPU_SORT_THREADS, GPU_SORT_THREADS
 
     assert RadixSorter(gpu).threads == (CPU_SORT_THREADS if gpu.is_software else GPU_SORT_THREADS)
-    for bad in (8, 24, 4096):  # fewer threads than digits, not a divisor of the block, no keys per thread
+    # fewer threads than digits, not a divisor of the block, no keys per thread, an odd number of keys each
+    for bad in (8, 24, 4096, 2048):
         with pytest.raises(ValueError, match="sort threads per block"):
             RadixSorter(gpu, threads=bad)
 

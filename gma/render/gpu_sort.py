@@ -37,9 +37,11 @@ class RadixSorter:
         self.ctx = ctx
         self.workspace = workspace or Workspace(ctx)
         self.threads = threads or (CPU_SORT_THREADS if ctx.is_software else GPU_SORT_THREADS)
-        if self.threads < (1 << RADIX_BITS) or SORT_BLOCK % self.threads or SORT_BLOCK // self.threads > 255:
+        keys_each = SORT_BLOCK // max(self.threads, 1)
+        # An even number of keys each: the passes take a thread's keys two per step (radix_digits.wgsl).
+        if self.threads < (1 << RADIX_BITS) or SORT_BLOCK % self.threads or keys_each > 255 or keys_each % 2:
             raise ValueError(f"{self.threads} sort threads per block: need a divisor of {SORT_BLOCK} with at "
-                             f"least {1 << RADIX_BITS} threads and at most 255 keys each")
+                             f"least {1 << RADIX_BITS} threads and an even number of keys each, at most 254")
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,

@@ -25,11 +25,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
     let base = key_offset();
     var counts = vec4<u32>(0u);   // per digit (radix_digits.wgsl)
-    for (var i = 0u; i < SORT_ITEMS; i++) {
-        let idx = start + i;
-        if idx < count {
-            add_digit(&counts, key_digit(keys[idx], base));
-        }
+    for (var i = 0u; i < SORT_ITEMS; i += 2u) {
+        var c = counts;
+        count_key(&c, start + i, count, base);
+        count_key(&c, start + i + 1u, count, base);
+        counts = c;
     }
     for (var d = 0u; d < RADIX; d++) {
         let n = digit_count(counts, d);
@@ -40,5 +40,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     workgroupBarrier();
     if lid < RADIX {
         hist[lid * info.groups_x + block] = atomicLoad(&block_hist[lid]);
+    }
+}
+
+fn count_key(c: ptr<function, vec4<u32>>, idx: u32, count: u32, base: u32) {
+    if idx < count {
+        add_digit(c, key_digit(keys[idx], base));
     }
 }

@@ -34,11 +34,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
     let base = key_offset();
     var counts = vec4<u32>(0u);   // per digit (radix_digits.wgsl)
-    for (var i = 0u; i < SORT_ITEMS; i++) {
-        let idx = start + i;
-        if idx < count {
-            add_digit(&counts, key_digit(keys_in[idx], base));
-        }
+    for (var i = 0u; i < SORT_ITEMS; i += 2u) {
+        var c = counts;
+        count_key(&c, start + i, count, base);
+        count_key(&c, start + i + 1u, count, base);
+        counts = c;
     }
     for (var d = 0u; d < RADIX; d++) {
         offsets[d * SORT_WG + lid] = digit_count(counts, d);
@@ -59,17 +59,30 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let b2 = bases_of(lid, 2u);
     let b3 = bases_of(lid, 3u);
     var seen = vec4<u32>(0u);   // this thread's earlier keys, per digit
-    for (var i = 0u; i < SORT_ITEMS; i++) {
-        let idx = start + i;
-        if idx < count {
-            let key = keys_in[idx];
-            let digit = key_digit(key, base);
-            let w = digit >> 2u;
-            let bases = select(select(b0, b1, (w & 1u) != 0u), select(b2, b3, (w & 1u) != 0u), (w & 2u) != 0u);
-            let pos = pick4(bases, digit) + digit_count(seen, digit);
-            add_digit(&seen, digit);
-            keys_out[pos] = key;
-            vals_out[pos] = vals_in[idx];
-        }
+    for (var i = 0u; i < SORT_ITEMS; i += 2u) {
+        var sn = seen;
+        scatter_key(&sn, start + i, count, base, b0, b1, b2, b3);
+        scatter_key(&sn, start + i + 1u, count, base, b0, b1, b2, b3);
+        seen = sn;
+    }
+}
+
+fn count_key(c: ptr<function, vec4<u32>>, idx: u32, count: u32, base: u32) {
+    if idx < count {
+        add_digit(c, key_digit(keys_in[idx], base));
+    }
+}
+
+fn scatter_key(seen: ptr<function, vec4<u32>>, idx: u32, count: u32, base: u32, b0: vec4<u32>, b1: vec4<u32>,
+               b2: vec4<u32>, b3: vec4<u32>) {
+    if idx < count {
+        let key = keys_in[idx];
+        let digit = key_digit(key, base);
+        let w = digit >> 2u;
+        let bases = select(select(b0, b1, (w & 1u) != 0u), select(b2, b3, (w & 1u) != 0u), (w & 2u) != 0u);
+        let pos = pick4(bases, digit) + digit_count(*seen, digit);
+        add_digit(seen, digit);
+        keys_out[pos] = key;
+        vals_out[pos] = vals_in[idx];
     }
 }
