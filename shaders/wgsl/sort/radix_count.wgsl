@@ -12,14 +12,13 @@
 @group(0) @binding(3) var<storage, read> key_base: array<u32>;   // see key_offset
 #endif
 
-var<workgroup> block_hist: array<atomic<u32>, RADIX>;
+// Each thread's count per digit; after the barrier thread d sums digit d's. (Workgroup atomics before:
+// lavapipe runs each as a loop over the lanes with a locked compare-exchange per lane. Renderer's
+// sorts, standard scene, in one process, interleaved: 0.94-0.95x.)
+var<workgroup> thread_counts: array<u32, RADIX * SORT_WG>;   // [RADIX][SORT_WG]
 
 @compute @workgroup_size(SORT_WG)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    if lid < RADIX {
-        atomicStore(&block_hist[lid], 0u);
-    }
-    workgroupBarrier();
     let count = info.count;
     let block = wg.x;
     let start = block * SORT_BLOCK + lid * SORT_ITEMS;
@@ -32,14 +31,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         counts = c;
     }
     for (var d = 0u; d < RADIX; d++) {
-        let n = digit_count(counts, d);
-        if n != 0u {
-            atomicAdd(&block_hist[d], n);
-        }
+        thread_counts[d * SORT_WG + lid] = digit_count(counts, d);
     }
     workgroupBarrier();
     if lid < RADIX {
-        hist[lid * info.groups_x + block] = atomicLoad(&block_hist[lid]);
+        var total = 0u;
+        for (var t = 0u; t < SORT_WG; t++) {
+            total += thread_counts[lid * SORT_WG + t];
+        }
+        hist[lid * info.groups_x + block] = total;
     }
 }
 
