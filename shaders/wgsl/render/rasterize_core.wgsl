@@ -338,12 +338,26 @@ fn column_alpha(s: ProjectedSurfel, px: vec2<f32>) -> ColumnAlpha {
 }
 
 // Alpha terms of the thread's pixel `k` (0-3: k ROW_STEPs below the first), forward and backward alike.
+// Pixel k's p and d are pixel k - 1's plus one row step, additions shared by the four calls, rather
+// than a multiply-add each (standard scene, both in one process, interleaved, 18 rounds: forward
+// rasterize 0.986x, backward 0.951x).
 fn quad_alpha(s: ProjectedSurfel, c: ColumnAlpha, k: u32) -> AlphaEval {
     if k == 0u {   // constant after inlining: the first pixel takes the column's own p and d
         return alpha_from(s, c.p, c.d);
     }
-    let dy = f32(k * ROW_STEP.y);
-    return alpha_from(s, c.p + dy * c.dp_dy, c.d + vec2<f32>(0.0, dy));
+    let step = f32(ROW_STEP.y);
+    let dp = step * c.dp_dy;   // exact (a power of two): the same for every k, so computed once
+    var p = c.p + dp;
+    var d = c.d + vec2<f32>(0.0, step);
+    if k >= 2u {   // constant after inlining; p and d of pixel k - 1 are common subexpressions
+        p += dp;
+        d.y += step;
+    }
+    if k >= 3u {
+        p += dp;
+        d.y += step;
+    }
+    return alpha_from(s, p, d);
 }
 
 fn is_done(b: PixelBlend) -> bool {
