@@ -126,10 +126,11 @@ def test_plain_and_subgroup_variants_agree(gpu):
         np.testing.assert_allclose(getattr(outs[0], name), getattr(outs[1], name), atol=1e-5)
 
 
-def test_intersection_block_masks_cover_every_reached_block(gpu):
-    """The subgroup rasterizers skip a 4x2 pixel block of a tile where an intersection's block mask
-    (isect_masks.wgsl) has no bit: every block where the reference alpha of the surfel reaches 1/255 at
-    some pixel centre must have its bit, and the masks must leave blocks out (else they prove nothing)."""
+def test_intersection_block_bits_cover_every_reached_block(gpu):
+    """The subgroup rasterizers skip a 4x2 pixel block of a tile where an intersection's block bits
+    (block_bits.wgsl, packed above bit 24 of its surfel id) leave it out: every block where the reference
+    alpha of the surfel reaches 1/255 at some pixel centre must be in, and the bits must leave blocks out
+    (else they prove nothing)."""
     if not gpu.has_subgroups:
         pytest.skip("adapter has no subgroups")
     from gma.render.reference import project_reference, surfel_alpha_reference
@@ -143,7 +144,9 @@ def test_intersection_block_masks_cover_every_reached_block(gpu):
     arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
     st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
     tx, ty = (cam.width + 15) // 16, (cam.height + 15) // 16
-    ids, masks = (gpu.read(b, np.uint32, st.num_isects) for b in (st.isect_ids, st.isect_masks))
+    packed = gpu.read(st.isect_ids, np.uint32, st.num_isects)
+    ids, bits = packed & 0xFFFFFF, (packed >> 24).astype(np.int64)
+    masks = ((bits & 15) | ((bits & 0xF0) << 12)) * 0x1111   # expand_block_bits
     ranges = gpu.read(st.tile_ranges, np.uint32, 2 * tx * ty).reshape(-1, 2)
     T, mu2d, _, _, _ = project_reference(scene["means"], scene["quats"], scene["scales"], scene["opacities"],
                                          torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K))
@@ -163,8 +166,8 @@ def test_intersection_block_masks_cover_every_reached_block(gpu):
         needed = np.bitwise_or.reduce(np.where(reached, block_bits[:, None], 0), axis=0)
         got = masks[lo:hi]
         missing = needed & ~got
-        assert not missing.any(), f"tile {tile}: blocks {missing[missing != 0]} reached but not in the masks"
-        assert (got != 0).all(), f"tile {tile}: a listed intersection with an empty mask"
+        assert not missing.any(), f"tile {tile}: blocks {missing[missing != 0]} reached but not in the bits"
+        assert (got != 0).all(), f"tile {tile}: a listed intersection that reaches no block"
         left_out += int((got != 0xFFFFFFFF).sum())
     assert left_out > 0
 

@@ -70,7 +70,7 @@ class ForwardState:
     channels: int
     num_isects: int
     proj: ProjectionState
-    isect_ids: wgpu.GPUBuffer     # tile-sorted surfel ids
+    isect_ids: wgpu.GPUBuffer     # tile-sorted surfel ids (low 24 bits; the subgroup variant's block bits above)
     tile_ranges: wgpu.GPUBuffer   # [num_tiles] vec2<u32>
     background: wgpu.GPUBuffer    # [C]
     color: wgpu.GPUBuffer         # [H, W, C]
@@ -80,7 +80,6 @@ class ForwardState:
     final_t: wgpu.GPUBuffer | None  # [H, W] (None: rendered with replay=False)
     last: wgpu.GPUBuffer | None     # [H, W] contributors per pixel (u32)
     records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
-    isect_masks: wgpu.GPUBuffer | None = None  # subgroup variant: tile-sorted block masks (isect_masks.wgsl)
 
 
 def _record_bytes(num_isects: int, normal_depth: bool) -> int:
@@ -174,12 +173,11 @@ class SurfelRasterizer:
         cp.end()
 
     @staticmethod
-    def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer, isect_masks: wgpu.GPUBuffer) -> None:
-        """The subgroup rasterizers (forward and backward) read the intersections' block masks
-        (isect_masks.wgsl) and the colours padded to a vec4 that projection wrote (see
-        rasterize_core.wgsl) instead of the colours at binding 2, which they do not declare."""
+    def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer) -> None:
+        """The subgroup rasterizers (forward and backward) read the colours padded to a vec4 that
+        projection wrote (see rasterize_core.wgsl) instead of the colours at binding 2, which they do not
+        declare."""
         del resources[2]
-        resources[14] = isect_masks
         resources[15] = colors4
 
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
@@ -187,7 +185,7 @@ class SurfelRasterizer:
         """Encode projection (then :meth:`depth_order` sorts). With ``keep`` the buffers the backward pass
         reads are allocated for this call; the rest is workspace scratch."""
         ctx, n = self.ctx, surfels.count
-        if n > MAX_WORKGROUPS * 256:
+        if n > MAX_WORKGROUPS * 256:  # also keeps surfel ids below 2^24 (block_bits.wgsl packs 8 bits above)
             raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
         if max(camera.width, camera.height) > MAX_IMAGE_SIDE:
             raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "
@@ -246,9 +244,9 @@ class SurfelRasterizer:
         """Encode intersection emission, the tile sort, tile ranges and the rasterizer. ``target`` is a
         list of output buffers (buffer variant: colour, alpha, normal, depth, and for a render the backward
         pass will replay, the final transmittance and contributor count) or a GPUTextureView (texture
-        variant, never replayed). Returns the tile-sorted surfel ids, the tile ranges, for a replayed
-        render whose backward will sum gradient records (:meth:`_records_for`) their :class:`RecordIndex`,
-        and for the subgroup variant the intersections' block masks (else None)."""
+        variant, never replayed). Returns the tile-sorted surfel ids (for the subgroup variant with each
+        intersection's block bits above bit 24, block_bits.wgsl), the tile ranges and, for a replayed render
+        whose backward will sum gradient records (:meth:`_records_for`), their :class:`RecordIndex`."""
         ctx, n = self.ctx, surfels.count
         tx, ty = tile_grid(camera.width, camera.height)
         cap = max(capacity, 1)
@@ -268,23 +266,20 @@ class SurfelRasterizer:
         defines = self.raster_defines(surfels.channels)
         subgroups = defines["USE_SUBGROUPS"]
         empty = self.workspace.get("empty", 64)
-        masks = None
-        if subgroups:
-            masks = ctx.buffer(4 * cap, "isect_masks") if replay else self.workspace.get("isect_masks", 4 * cap)
         if n > 0:
             self._setup(encoder, st, timer)
-            emit = ctx.compute_pipeline("render/emit_isects.wgsl", keyed)
-            self._dispatch(encoder, emit, [st.params, st.depth_order, st.isect_offsets, st.tile_counts,
-                                           st.tile_rects, isect_tiles, isect_ids]
-                           + ([records.record_base] if records else []), ((n + 255) // 256, 1, 1), "bin", timer)
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups})
+            emit_resources = dict(enumerate([st.params, st.depth_order, st.isect_offsets, st.tile_counts,
+                                             st.tile_rects, isect_tiles, isect_ids]))
+            if records:
+                emit_resources[7] = records.record_base
+            if subgroups:
+                emit_resources[8] = st.block_bands
+            self._dispatch(encoder, emit, emit_resources, ((n + 255) // 256, 1, 1), "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
-            if subgroups:
-                mask_pass = ctx.compute_pipeline("render/isect_masks.wgsl", keyed)
-                self._dispatch(encoder, mask_pass, [st.elem_info, isect_tiles, isect_ids, st.block_bands, st.params,
-                                                    masks], st.elem_info, "bin", timer)
         else:
             encoder.clear_buffer(ranges)  # every tile is empty
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
@@ -295,9 +290,9 @@ class SurfelRasterizer:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay})
             resources = dict(enumerate(inputs + list(target)))
         if subgroups:
-            self._subgroup_inputs(resources, st.colors4 if n else empty, masks)
+            self._subgroup_inputs(resources, st.colors4 if n else empty)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
-        return isect_ids, ranges, records, masks
+        return isect_ids, ranges, records
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
@@ -345,9 +340,9 @@ class SurfelRasterizer:
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
-        isect_ids, ranges, records, masks = lists
+        isect_ids, ranges, records = lists
         return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
-                            *(replayed or (None, None)), records=records, isect_masks=masks)
+                            *(replayed or (None, None)), records=records)
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
@@ -407,7 +402,7 @@ class SurfelRasterizer:
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         colors_out = color_in_proj or records is not None
         if defines["USE_SUBGROUPS"]:
-            self._subgroup_inputs(resources, state.proj.colors4, state.isect_masks)
+            self._subgroup_inputs(resources, state.proj.colors4)
         if colors_out:
             resources.pop(13, None)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)

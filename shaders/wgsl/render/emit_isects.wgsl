@@ -6,7 +6,10 @@
 // rasterize_bwd.wgsl): each key also carries, from bit RECORD_KEY_SHIFT, the intersection's number k
 // within its surfel's list, and the surfel's first list index goes to record_base, so that the
 // intersection's emission index, record_base[surfel] + k, is known after the tile sort too.
+// Define BLOCK_BITS (the rasterizers' subgroup variant): each surfel id carries, from bit SURFEL_ID_BITS,
+// the tile's blocks the surfel can reach (tile_block_bits in block_bits.wgsl).
 #include "common/render_types.wgsl"
+#include "render/block_bits.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
 @group(0) @binding(1) var<storage, read> sorted_ids: array<u32>;    // [N] depth order
@@ -17,6 +20,9 @@
 @group(0) @binding(6) var<storage, read_write> isect_ids: array<u32>;
 #if RECORD_KEYS
 @group(0) @binding(7) var<storage, read_write> record_base: array<u32>;   // [N] by surfel id
+#endif
+#if BLOCK_BITS
+@group(0) @binding(8) var<storage, read> block_bands: array<vec2<u32>>;   // [N] see write_bands
 #endif
 
 @compute @workgroup_size(256)
@@ -38,6 +44,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     record_base[sid] = first;
 #endif
     let cap = params.isect_capacity;
+#if BLOCK_BITS
+    let bands = block_bands[sid];
+#endif
     for (var ty = lo.y; ty <= hi.y; ty++) {
         for (var tx = lo.x; tx <= hi.x; tx++) {
             if tiles.w == 0u && ((tiles.z >> ((ty - lo.y) * 16u + tx - lo.x)) & 1u) == 0u {
@@ -51,7 +60,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             isect_tiles[out] = ty * params.tile_grid.x + tx;
 #endif
+#if BLOCK_BITS
+            let tile_id = ty * params.tile_grid.x + tx;
+            isect_ids[out] = sid | (tile_block_bits(bands, tile_id, params.tile_grid.x) << SURFEL_ID_BITS);
+#else
             isect_ids[out] = sid;
+#endif
             out++;
         }
     }

@@ -15,8 +15,8 @@
 @group(0) @binding(8) var<storage, read_write> depth_keys: array<u32>;            // [N]
 @group(0) @binding(9) var<storage, read_write> surfel_ids: array<u32>;            // [N]
 // What the rasterizers' subgroup variant needs per intersection, precomputed here once per surfel (see
-// isect_masks.wgsl and composite_quad in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
-// (see write_bands below; isect_masks.wgsl turns them into the tile's blocks), and the first four colour channels as one
+// block_bits.wgsl and composite_quad in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
+// (see write_bands below; tile_block_bits turns them into the tile's blocks), and the first four colour channels as one
 // zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
 // the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
 // -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
@@ -194,7 +194,7 @@ fn project_surfel(i: u32) -> vec2<u32> {
 }
 
 // The footprint from which write_bands computes the rasterizers' block bands (see BlockShape above and
-// block_mask in isect_masks.wgsl): the ellipse u^2 + v^2 <= r2u, its
+// tile_block_bits in block_bits.wgsl): the ellipse u^2 + v^2 <= r2u, its
 // level slightly raised (1.001 r2u + 1e-3) against the rounding of log, exp and the threshold test. It is
 // computed from T's rows shifted to the projected centre (t0 - mu.x t2, t1 - mu.y t2), so that the centred
 // second moments below do not cancel against the square of an absolute position (hundreds of pixels):
@@ -288,7 +288,7 @@ fn write_bands(i: u32, f: BlockShape, mu: vec2<f32>, p_lo: vec2<f32>, p_hi: vec2
 // coordinates) that hold a 4x2 block its block bands reach. In the others the surfel has alpha < 1/255
 // at every pixel (the bands are strictly conservative), so images and gradients do not change, save the
 // rounding of sums whose batches shift. A band's columns [a, b] reach tiles a / 4 .. b / 4 of the
-// band's tile row, exactly the tiles where block_mask (band_columns, isect_masks.wgsl) is non-zero.
+// band's tile row, exactly the tiles where tile_block_bits (block_bits.wgsl) is non-zero.
 // Returns x0 | y0 << 16, x1 | y1 << 16, the reached tiles (bit (ty - y0) * 16 + tx - x0), and 1 when
 // every tile of the rectangle is listed (surfels whose bands are their box's, see write_bands).
 // Standard scene (100k surfels, random orientations): 238k -> 224k intersections.

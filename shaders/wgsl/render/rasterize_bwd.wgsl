@@ -375,7 +375,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
             let n = num_hits - hh - h0;
             let mine_slot = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
-            let mine_id = isect_ids[range.x + start + mine_slot];
+            let mine_id = isect_ids[range.x + start + mine_slot] & SURFEL_ID_MASK;
             // Field by field: the normal and depth are read only when their gradients are wanted (against
             // one load of the whole surfel, standard scene, 100k surfels, lavapipe, nine alternating runs:
             // the backward's GPU time per forward rasterize pass lower in eight, by ~3 %).
@@ -507,7 +507,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let start = b * BATCH;   // local index of the batch's first intersection
         workgroupBarrier();
         if lid < BATCH && start + lid < count {
-            let sid = isect_ids[range.x + start + lid];
+            let sid = isect_ids[range.x + start + lid] & SURFEL_ID_MASK;
             batch_ids[lid] = sid;
             stage_surfel(lid, sid);
         }

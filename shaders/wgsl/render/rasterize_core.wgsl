@@ -5,18 +5,17 @@
 // Defines: CHANNELS, BATCH, USE_SUBGROUPS and SG (the subgroup size) for the subgroup variant.
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
+#include "render/block_bits.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
 @group(0) @binding(1) var<storage, read> projected: array<ProjectedSurfel>;   // [N]
 #if !USE_SUBGROUPS
 @group(0) @binding(2) var<storage, read> colors: array<f32>;                  // [N, CHANNELS]
 #endif
-@group(0) @binding(3) var<storage, read> isect_ids: array<u32>;               // tile-sorted
+@group(0) @binding(3) var<storage, read> isect_ids: array<u32>;   // tile-sorted; SURFEL_ID_MASK for the id
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-// Per intersection (list order): the tile's 4x2 pixel blocks its surfel can reach (isect_masks.wgsl).
-@group(0) @binding(14) var<storage, read> isect_masks: array<u32>;
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR)
 // Per subgroup (row sg_id * (BATCH + SG)): the batch's intersections whose block mask meets the
 // subgroup's blocks, then up to SG - 1 entries of scratch (see list_hits). Only the subgroup's own lanes
@@ -65,8 +64,9 @@ fn all_lanes(pred: bool) -> bool {
     return subgroupBroadcast(lanes_or(u32(!pred)), 0u) == 0u;
 }
 
-// Write, in slot order, the slots among the `m` intersections from list index `start` whose block masks
-// meet `blocks` into hit_slots[row..]; returns their number (the same in every lane). Every lane stores,
+// Write, in slot order, the slots among the `m` intersections from list index `start` whose block bits
+// (block_bits.wgsl) meet `blocks` into hit_slots[row..]; returns their number (the same in every lane).
+// Every lane stores,
 // the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
 // divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
 // the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
@@ -77,7 +77,8 @@ fn list_hits(start: u32, m: u32, blocks: u32, row: u32, sg_lane: u32) -> u32 {
     var count = 0u;
     for (var j = 0u; j < m; j += SG) {
         let slot = j + sg_lane;
-        let hit = slot < m && (isect_masks[start + min(slot, m - 1u)] & blocks) != 0u;
+        let id = isect_ids[start + min(slot, m - 1u)];
+        let hit = slot < m && (expand_block_bits(id >> SURFEL_ID_BITS) & blocks) != 0u;
         let hits = lanes_ballot(hit, sg_lane);
         let below = countOneBits(hits & ((1u << sg_lane) - 1u));
         let total = countOneBits(hits);
@@ -214,7 +215,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
         }
         let base = range.x + b * BATCH;
         if lid < BATCH && base + lid < range.y {
-            stage_surfel(lid, isect_ids[base + lid]);
+            stage_surfel(lid, isect_ids[base + lid] & SURFEL_ID_MASK);
         }
         workgroupBarrier();
         let was_done = done;
@@ -243,7 +244,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // shuffles of private-array elements.
 //
 // Each subgroup walks the tile's list on its own, with no barriers: it lists, BATCH intersections at a
-// time, those whose block mask (isect_masks.wgsl, computed once per render) meets its pixels, and a lane
+// time, those whose block bits (block_bits.wgsl, packed into the ids by emission) meet its pixels, and a lane
 // reads the surfel it passes around (and its colour) from storage, so only surfels that touch the
 // subgroup's block are read, and none is copied through workgroup memory, whose stores lavapipe runs one
 // lane at a time. (Against staging the surfels and colours as the plain variant does, same runs on
@@ -252,7 +253,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // shader with barriers into a coroutine and keeps every variable a loop carries in the coroutine's frame,
 // writing each through the lane mask (a load, a blend and a store): against the workgroup staging the
 // batches' block masks between barriers, standard scene, alternating runs, this pass 0.75-0.85x and the
-// backward 0.70-0.77x, the mask pass +2.5-3 ms; images and gradients bit-identical.
+// backward 0.70-0.77x (then with a separate mask pass, +2.5-3 ms); images and gradients bit-identical.
 //
 // Each thread composites four pixels of one column, ROW_STEP apart, so that a subgroup of 8 covers a
 // 4x8 block (see tile_pixel_quad) and every surfel passed around serves four times as many pixels
@@ -443,7 +444,7 @@ fn composite_quad(tile: u32, pix: vec2<u32>, sg_lane: u32, sg_id: u32,
                 break;
             }
             let mine_slot = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
-            let mine_sid = isect_ids[base + mine_slot];
+            let mine_sid = isect_ids[base + mine_slot] & SURFEL_ID_MASK;
             let mine = projected[mine_sid];
             let mine_col = colors4[mine_sid];
             let n = min(SG, num_hits - h);

@@ -1,0 +1,47 @@
+// Which 4x2 pixel blocks of a tile a surfel can reach with alpha >= 1/255, for the rasterizers' subgroup
+// variant (CPU drivers), from the block bands projection wrote (write_bands in project_fwd.wgsl).
+// Emission (emit_isects.wgsl, define BLOCK_BITS) packs them into the top SURFEL_ID_BITS.. bits of each
+// intersection's surfel id, so that a subgroup learns which listed intersections reach its pixels from
+// the ids it reads anyway: no mask pass and no mask buffer. (A pass after the tile sort that wrote each
+// intersection's mask cost 2.5-3 ms on the standard scene.)
+
+// Surfel ids fit in 24 bits (the renderer takes at most 65535 * 256 surfels); the top 8 bits of a
+// listed id carry its block bits (tile_block_bits), and every reader masks them off.
+const SURFEL_ID_BITS: u32 = 24u;
+const SURFEL_ID_MASK: u32 = (1u << SURFEL_ID_BITS) - 1u;
+
+// The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
+// (absolute 8-row band) of a surfel with block bands `w` (see write_bands in project_fwd.wgsl).
+fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {
+    let j = band - (w.x & 0x1fffu);   // wraps above the first band
+    let nb = (w.x >> 13u) & 3u;
+    let col0 = i32(w.x >> 15u) - i32(tcol);
+    let bits = w.y >> (10u * min(j, 2u));
+    let lo = max(col0 + select(i32(bits & 31u), 0, nb == 0u), 0);
+    let hi = min(select(col0 + i32((bits >> 5u) & 31u), i32(w.y) - i32(tcol), nb == 0u), 3);
+    let cols = ((2u << u32(max(hi, 0))) - 1u) & ~((1u << u32(min(lo, 3))) - 1u);
+    return select(0u, cols, (nb == 0u || j < nb) && lo <= hi);
+}
+
+// The block columns (4 bits each) of tile `tile`'s two 8-row bands (a subgroup's height, so a finer mask
+// would list no fewer hits) where a surfel with block bands `w` can reach alpha >= 1/255 at some pixel
+// centre: band 0's in bits 0-3, band 1's in bits 4-7. Each holds over its band's four block rows
+// (expand_block_bits). Strictly conservative (see block_shape in project_fwd.wgsl), so a subgroup that the surfel's box reaches but
+// this mask does not sees only alpha < 1/255 from it, which the blend skips anyway: images and
+// gradients are bit-identical to the box's. Standard scene (100k surfels, random orientations):
+// subgroup hit candidates 669k with the box, 551k with bands for every surfel; lavapipe, same runs
+// against the box, two each: forward rasterize -8 to -9 %, backward -6 to -7.5 %, projection +0.3 to
+// +0.5 ms; avatar-like scene (small surfels, no fewer hits): forward -0.5 / +0.8 %, backward -2 / +3 %
+// (noise). Tried: computing the ellipse's columns while staging (32 bytes per surfel read; standard
+// -3 to -5 %, avatar +5 to +8 %); per-band words read from 64 or 16 bytes per surfel (standard -5 to
+// -6 %, avatar +4 to +6 % and +2 to +4 %): the extra bytes per staged surfel miss the cache.
+fn tile_block_bits(w: vec2<u32>, tile: u32, tile_grid_x: u32) -> u32 {
+    let band = (tile / tile_grid_x) * (TILE_SIZE / 8u);
+    let tcol = (tile % tile_grid_x) * (TILE_SIZE / 4u);
+    return band_columns(w, band, tcol) | (band_columns(w, band + 1u, tcol) << 4u);
+}
+
+// The blocks (bit by * 4 + bx, block_bit in rasterize_core.wgsl) of tile_block_bits' 8 bits.
+fn expand_block_bits(b: u32) -> u32 {
+    return ((b & 15u) | ((b & 0xf0u) << 12u)) * 0x1111u;
+}
