@@ -1,0 +1,92 @@
+#!/usr/bin/env python3
+"""Two versions of the WGSL shaders against each other in one process, for shader work on a machine whose
+speed drifts (this 2-core VM's passes swing by up to 1.6x within minutes, more than most shader changes
+win). Each round renders the standard scene (forward, then backward with a random colour gradient) once
+with each shader directory, in alternating order, through one rasterizer per directory; a round's
+GPU pass times are compared directly. Prints per pass the medians and the median of the per-round ratios
+B / A, and the images' and gradients' sums (equal sums: the change kept them, very likely bit for bit).
+
+    cp -r shaders/wgsl /tmp/a && cp -r shaders/wgsl /tmp/b   # then edit /tmp/b
+    python benchmarks/shader_ab.py /tmp/a /tmp/b [--rounds 16] [--count 100000]
+
+Only the shaders differ: the Python side is this checkout's. Without ../shared's standard scene it renders
+a random scene of --count surfels.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from common import load_standard_workload, machine, workload_surfels  # noqa: E402
+
+from gma.gpu import PassTimer, get_context  # noqa: E402
+from gma.gpu.shaders import ShaderLibrary  # noqa: E402
+from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
+
+PASSES = ("project", "sort", "bin", "rasterize", "rasterize_bwd", "record_slots", "project_bwd")
+
+
+def scene_and_camera(count: int):
+    module = load_standard_workload()
+    if module is not None:
+        return workload_surfels(module, count)
+    from gma.core.camera import Camera
+    from gma.render.scenes import random_scene
+
+    K = np.array([[400.0, 0, 128], [0, 400.0, 128], [0, 0, 1]], np.float32)
+    return random_scene(count, 0), Camera(np.eye(4, dtype=np.float32), K, 256, 256)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("a", help="shader directory A (like shaders/wgsl)")
+    p.add_argument("b", help="shader directory B")
+    p.add_argument("--rounds", type=int, default=16)
+    p.add_argument("--count", type=int, default=100000, help="surfels of the standard scene")
+    args = p.parse_args()
+    dirs = [Path(args.a), Path(args.b)]
+    for d in dirs:
+        if not (d / "render" / "rasterize_fwd.wgsl").is_file():
+            print(f"{d}: not a shader directory (no render/rasterize_fwd.wgsl)", file=sys.stderr)
+            return 2
+    ctx = get_context()
+    print(f"adapter: {ctx.name}; {machine()}")
+    scene, cam = scene_and_camera(args.count)
+    surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
+                                        scene["colors"])
+    upstream = np.random.default_rng(0).normal(size=(cam.height, cam.width, scene["colors"].shape[1]))
+    upstream = (upstream * 1e-3).astype(np.float32)
+    # Each directory gets its own shader library and pipeline cache; the context switches between them.
+    setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx)) for d in dirs]
+    timer = PassTimer(ctx)
+    times: list[list[dict]] = [[], []]
+    sums: list[tuple] = [(), ()]
+    warmup = min(2, max(args.rounds - 1, 0))
+    for r in range(args.rounds):
+        for i in (0, 1) if r % 2 == 0 else (1, 0):
+            ctx.shaders, ctx._pipelines, rast = setups[i]
+            state = rast.forward(surfels, cam, timer=timer)
+            out = read_outputs(ctx, state)
+            passes = timer.results()
+            grads = rast.backward(state, surfels, upstream, None, None, None, timer=timer)
+            passes.update(timer.results())
+            if r >= warmup:
+                times[i].append(passes)
+            sums[i] = (float(out.color.sum()), float(np.abs(grads.means).sum()), float(np.abs(grads.colors).sum()))
+    print(f"{'pass':14s} {'A ms':>8s} {'B ms':>8s} {'B/A':>7s}  (median of per-round ratios, {len(times[0])} rounds)")
+    for name in PASSES:
+        a = np.array([t.get(name, 0.0) for t in times[0]])
+        b = np.array([t.get(name, 0.0) for t in times[1]])
+        if a.size and a.min() > 0:
+            print(f"{name:14s} {np.median(a):8.2f} {np.median(b):8.2f} {np.median(b / a):7.3f}")
+    print(f"sums (colour, |d means|, |d colours|): A {sums[0]}\n{'':38s}B {sums[1]}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
