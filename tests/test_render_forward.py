@@ -128,11 +128,13 @@ def test_plain_and_subgroup_variants_agree(gpu):
 
 def test_intersection_block_bits_cover_every_reached_block(gpu):
     """The subgroup rasterizers skip a 4x2 pixel block of a tile where an intersection's block bits
-    (block_bits.wgsl, packed above bit 24 of its surfel id) leave it out: every block where the reference
-    alpha of the surfel reaches 1/255 at some pixel centre must be in, and the bits must leave blocks out
-    (else they prove nothing)."""
+    (block_bits.wgsl, packed above SURFEL_ID_BITS of its surfel id) leave it out: every block where the
+    reference alpha of the surfel reaches 1/255 at some pixel centre must be in, and the bits must leave
+    blocks out (else they prove nothing)."""
     if not gpu.has_subgroups:
         pytest.skip("adapter has no subgroups")
+    from gma.render.layouts import tile_grid
+    from gma.render.rasterizer import SURFEL_ID_BITS
     from gma.render.reference import project_reference, surfel_alpha_reference
 
     scene = special_surfels()
@@ -143,9 +145,9 @@ def test_intersection_block_bits_cover_every_reached_block(gpu):
     rast.use_subgroups = True
     arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
     st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
-    tx, ty = (cam.width + 15) // 16, (cam.height + 15) // 16
+    tx, ty = tile_grid(cam.width, cam.height)
     packed = gpu.read(st.isect_ids, np.uint32, st.num_isects)
-    ids, bits = packed & 0xFFFFFF, (packed >> 24).astype(np.int64)
+    ids, bits = packed & ((1 << SURFEL_ID_BITS) - 1), (packed >> SURFEL_ID_BITS).astype(np.int64)
     masks = ((bits & 15) | ((bits & 0xF0) << 12)) * 0x1111   # expand_block_bits
     ranges = gpu.read(st.tile_ranges, np.uint32, 2 * tx * ty).reshape(-1, 2)
     T, mu2d, _, _, _ = project_reference(scene["means"], scene["quats"], scene["scales"], scene["opacities"],

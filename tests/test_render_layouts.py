@@ -9,7 +9,7 @@ import pytest
 import wgpu
 
 from gma.render.layouts import DISPATCH_INFO, PROJECTED_SURFEL, RENDER_PARAMS, render_params
-from gma.render.rasterizer import RECORD_KEY_SHIFT
+from gma.render.rasterizer import MAX_WORKGROUPS, RECORD_KEY_SHIFT, SURFEL_ID_BITS
 
 pytestmark = pytest.mark.gpu
 
@@ -36,6 +36,7 @@ fn main() {
     out[51] = f32(info.count);
     out[52] = f32(RECORD_KEY_SHIFT);
     out[53] = f32(TILE_KEY_MASK);
+    out[54] = f32(SURFEL_ID_BITS);
 }
 """
 
@@ -70,4 +71,5 @@ def test_struct_layouts_match_wgsl(gpu):
     np.testing.assert_array_equal(got[32:48], np.arange(1, 17))
     np.testing.assert_array_equal(got[48:52], [3, 1, 1, 4000])
     assert RENDER_PARAMS.itemsize == 128 and PROJECTED_SURFEL.itemsize == 64
-    np.testing.assert_array_equal(got[52:54], [RECORD_KEY_SHIFT, (1 << RECORD_KEY_SHIFT) - 1])
+    np.testing.assert_array_equal(got[52:55], [RECORD_KEY_SHIFT, (1 << RECORD_KEY_SHIFT) - 1, SURFEL_ID_BITS])
+    assert MAX_WORKGROUPS * 256 <= 1 << SURFEL_ID_BITS, "the renderer's surfel limit must keep ids below the block bits"

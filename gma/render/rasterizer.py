@@ -31,6 +31,7 @@ MAX_IMAGE_SIDE = 65535  # project_fwd.wgsl packs 4x2-block coordinates in 16 bit
 DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
 RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
 RECORD_KEY_SHIFT = 16  # render_types.wgsl: bits of a record-carrying intersection key that hold the tile
+SURFEL_ID_BITS = 24  # render_types.wgsl: bits of a listed surfel id below its block bits (block_bits.wgsl)
 
 
 @dataclass
@@ -185,7 +186,7 @@ class SurfelRasterizer:
         """Encode projection (then :meth:`depth_order` sorts). With ``keep`` the buffers the backward pass
         reads are allocated for this call; the rest is workspace scratch."""
         ctx, n = self.ctx, surfels.count
-        if n > MAX_WORKGROUPS * 256:  # also keeps surfel ids below 2^24 (block_bits.wgsl packs 8 bits above)
+        if n > MAX_WORKGROUPS * 256:  # also keeps surfel ids below 2^SURFEL_ID_BITS (tested)
             raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
         if max(camera.width, camera.height) > MAX_IMAGE_SIDE:
             raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "

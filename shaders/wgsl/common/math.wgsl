@@ -14,6 +14,11 @@ fn quat_to_mat3(q_in: vec4<f32>) -> mat3x3<f32> {
     );
 }
 
+// Component `i` (0-3) of v by selects: an indexed private vector would go to scratch memory on CPU drivers.
+fn component4(v: vec4<f32>, i: u32) -> f32 {
+    return select(select(select(v.x, v.y, i == 1u), v.z, i == 2u), v.w, i == 3u);
+}
+
 fn ceil_div(a: u32, b: u32) -> u32 {
     return (a + b - 1u) / b;
 }

@@ -12,6 +12,11 @@ const CULLED_KEY: u32 = 0xffffffffu;
 // (the tile sort orders at most 16 bits, so the tile grid has at most 65536 tiles there).
 const RECORD_KEY_SHIFT: u32 = 16u;
 const TILE_KEY_MASK: u32 = 0xffffu;
+// Surfel ids fit in 24 bits (the renderer takes at most 65535 * 256 surfels). In the rasterizers'
+// subgroup variant the top 8 bits of a listed id carry its block bits (tile_block_bits in
+// render/block_bits.wgsl), and every reader of the tile lists masks them off.
+const SURFEL_ID_BITS: u32 = 24u;
+const SURFEL_ID_MASK: u32 = (1u << SURFEL_ID_BITS) - 1u;
 
 // Per-frame parameters (uniform, 128 bytes).
 struct RenderParams {

@@ -5,11 +5,6 @@
 // the ids it reads anyway: no mask pass and no mask buffer. (A pass after the tile sort that wrote each
 // intersection's mask cost 2.5-3 ms on the standard scene.)
 
-// Surfel ids fit in 24 bits (the renderer takes at most 65535 * 256 surfels); the top 8 bits of a
-// listed id carry its block bits (tile_block_bits), and every reader masks them off.
-const SURFEL_ID_BITS: u32 = 24u;
-const SURFEL_ID_MASK: u32 = (1u << SURFEL_ID_BITS) - 1u;
-
 // The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
 // (absolute 8-row band) of a surfel with block bands `w` (see write_bands in project_fwd.wgsl).
 fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {

@@ -114,11 +114,6 @@ fn raster_grads(i: u32) -> RasterGrads {
 }
 #endif
 
-// Colour channel c (< 4) of v.
-fn channel(v: vec4<f32>, c: u32) -> f32 {
-    return select(select(select(v.x, v.y, c == 1u), v.z, c == 2u), v.w, c == 3u);
-}
-
 // Gradient of R(q / |q|) with respect to q, given dL/dR (columns of v_r are dL/d(column)).
 fn quat_backward(q_in: vec4<f32>, v_r: mat3x3<f32>) -> vec4<f32> {
     let inv_norm = inverseSqrt(dot(q_in, q_in));
@@ -159,7 +154,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #endif
 #if COLORS_OUT
     for (var c = 0u; c < CHANNELS; c++) {
-        v_colors[i * CHANNELS + c] = select(channel(rg.v_color, c), 0.0, culled);
+        v_colors[i * CHANNELS + c] = select(component4(rg.v_color, c), 0.0, culled);
     }
 #endif
     if culled {

@@ -443,11 +443,6 @@ const PROJ_VALUES: u32 = 16u;
 const PROJ_VALUES: u32 = 12u + CHANNELS;   // colour gradients in the normal and depth slots
 #endif
 
-// Component `i` (0-3) of v by selects: an indexed private vector would go to scratch memory on CPU drivers.
-fn component4(v: vec4<f32>, i: u32) -> f32 {
-    return select(select(select(v.x, v.y, i == 1u), v.z, i == 2u), v.w, i == 3u);
-}
-
 // Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main); `d` fills
 // slots 12-15 (normal and depth, or the colours when there are no normal/depth gradients).
 fn proj_component(i: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> f32 {

@@ -6,7 +6,6 @@
 // (Writing the records at their emission index instead, looked up while staging, made the rasterizer
 // backward ~12 ms slower on the standard scene, more than this pass and the scattered reads cost.)
 #include "common/render_types.wgsl"
-#include "render/block_bits.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;             // isect_capacity = the list's length
 @group(0) @binding(1) var<storage, read> isect_keys: array<u32>;     // tile-sorted keys
