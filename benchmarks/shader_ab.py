@@ -27,7 +27,9 @@ from common import load_standard_workload, machine, workload_surfels  # noqa: E4
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.gpu.shaders import ShaderLibrary  # noqa: E402
 from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
+from gma.render.rasterizer import MAX_WORKGROUPS  # noqa: E402
 
+MAX_SURFELS = MAX_WORKGROUPS * 256
 PASSES = ("project", "sort", "bin", "rasterize", "rasterize_bwd", "record_slots", "project_bwd")
 
 
@@ -49,6 +51,12 @@ def main() -> int:
     p.add_argument("--rounds", type=int, default=16)
     p.add_argument("--count", type=int, default=100000, help="surfels of the standard scene")
     args = p.parse_args()
+    if args.rounds < 1:
+        print(f"--rounds {args.rounds}: needs at least 1", file=sys.stderr)
+        return 2
+    if not 1 <= args.count <= MAX_SURFELS:
+        print(f"--count {args.count}: must lie in 1..{MAX_SURFELS} (the renderer's surfel limit)", file=sys.stderr)
+        return 2
     dirs = [Path(args.a), Path(args.b)]
     for d in dirs:
         if not (d / "render" / "rasterize_fwd.wgsl").is_file():
