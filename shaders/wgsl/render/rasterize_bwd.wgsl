@@ -113,25 +113,15 @@ fn background4() -> vec4<f32> {
 // pass a surfel between the lanes are shared by the four pixels too. Standard scene, 100k surfels, this
 // pass on lavapipe: 358 ms with one pixel per thread, 273 with two, 236 with four.
 
-// Below 4 channels the replay carries the alpha channel in the colour's padding lane: alpha = sum of w
-// times a colour of 1, so with col.w = 1, v_col.w = the alpha's upstream gradient and acc_col.w its sum
-// behind the surfel (0 at the back: no background term), the colour's dot product and sums take the
-// alpha's terms too. The colour gradient's w lane (w times the alpha's upstream) is then never read.
-// (Standard scene, 100k surfels, lavapipe, both in one process, interleaved, 8 rounds: this pass 0.952x;
-// gradients the same to the bit there, where the alpha's upstream is zero.)
-const ALPHA_IN_COLOR: bool = CHANNELS < 4u;
-
 // Replay state of one pixel (see the plain variant below for the quantities).
 struct PixelReplay {
     px: vec2<f32>,
     T: f32,
     last: u32,
     v_col: vec4<f32>,
-    acc_col: vec4<f32>,
     v_a: f32,
-    acc_a: f32,
     v_nd: vec4<f32>,
-    acc_nd: vec4<f32>,
+    behind: f32,   // what lies behind the current surfel, weighted by the upstream gradients (see replay_hit)
 }
 
 fn start_replay(pix: vec2<u32>) -> PixelReplay {
@@ -143,21 +133,16 @@ fn start_replay(pix: vec2<u32>) -> PixelReplay {
     r.last = select(0u, last_index[p], inside);
     // Colours in one vec4 register: any dynamically indexed private array would be placed in per-lane
     // scratch memory by CPU drivers, making every access in the loop a gather. Below 4 channels colors4.w
-    // holds the depth (DEPTH_IN_COLOR), which main replaces by the alpha channel's 1 (ALPHA_IN_COLOR).
+    // holds the depth (DEPTH_IN_COLOR), which v_col.w = 0 cancels.
     r.v_col = select(vec4<f32>(0.0), upstream_color4(p), inside);
-    r.acc_col = r.T * background4();
     r.v_a = select(0.0, v_out_alpha[p], inside);
-    r.acc_a = 0.0;
-    if ALPHA_IN_COLOR {   // constant: the alpha channel in the colour's padding lane (acc_col.w starts at 0)
-        r.v_col.w = r.v_a;
-    }
+    r.behind = r.T * dot(r.v_col, background4());   // the background's share of the colour (none of alpha)
 #if NORMAL_DEPTH_GRADS
     r.v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
                                                  v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
 #else
     r.v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers are not bound)
 #endif
-    r.acc_nd = vec4<f32>(0.0);
     return r;
 }
 
@@ -181,16 +166,13 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
     let ra = 1.0 / (1.0 - alpha);
     let T_i = (*r).T * ra;
     let w = select(0.0, alpha * T_i, contrib);
-    var v_alpha = dot((*r).v_col, T_i * col - (*r).acc_col * ra);
-    if !ALPHA_IN_COLOR {   // constant
-        v_alpha += (*r).v_a * (T_i - (*r).acc_a * ra);
-        (*r).acc_a += w;
-    }
+    // The upstream-weighted output of this surfel (see `behind` in main's plain variant).
+    var g = dot((*r).v_col, col) + (*r).v_a;
 #if NORMAL_DEPTH_GRADS
-    v_alpha += dot((*r).v_nd, T_i * nd - (*r).acc_nd * ra);
+    g += dot((*r).v_nd, nd);
     (*q).v_nd += w * (*r).v_nd;
-    (*r).acc_nd += w * nd;
 #endif
+    let v_alpha = T_i * g - ra * (*r).behind;
     let ag = alpha_backward(ae, select(0.0, v_alpha, contrib));
     (*q).v_p += ag.v_p;
     if k != 0u {   // constant after inlining
@@ -198,7 +180,7 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
     }
     (*q).v_mu2d += ag.v_mu2d;
     (*q).v_opacity += ag.v_opacity;
-    (*r).acc_col += w * col;
+    (*r).behind += w * g;
     (*r).T = select((*r).T, T_i, contrib);
     *hit = contrib;
     return w * (*r).v_col;
@@ -407,10 +389,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #endif
                 let s = ProjectedSurfel(subgroupShuffle(mine_t0, k), subgroupShuffle(mine_t1, k),
                                         subgroupShuffle(mine_t2, k), nd);
-                var col = subgroupShuffle(mine_col, k);
-                if ALPHA_IN_COLOR {   // constant
-                    col.w = 1.0;      // the alpha channel's "colour" (the lane held the depth)
-                }
+                let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
                 var q = QuadGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
@@ -490,15 +469,21 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let px = vec2<f32>(pix) + 0.5;
     let p = select(0u, pix.y * params.image_size.x + pix.x, inside);
 
-    // Per-pixel state of the replay. `acc_*` hold what lies behind the current surfel: sum of w f over
-    // later surfels, the background term for colour included (out = sum w c + T_final bg).
+    // Per-pixel state of the replay. Every output f of the pixel (colour channels, alpha, normal, depth)
+    // is sum_i w_i f_i (+ T_final bg for colour), so d f / d alpha_i = T_i f_i - behind_f / (1 - alpha_i),
+    // where behind_f, what lies behind surfel i, is the sum of w_j f_j over later surfels j (plus T_final
+    // bg). The loss needs only sum_f v_f d f / d alpha_i, in which those sums appear only as
+    // sum_f v_f behind_f: one scalar, `behind`, instead of one value per output. (Subgroup variant,
+    // standard scene, 100k surfels, lavapipe, both in one process, interleaved, 8 rounds, against a vector
+    // of sums per output: this pass 0.909x.)
     var T = select(1.0, final_t[p], inside);
     let last = select(0u, last_index[p], inside);
     var v_col: array<vec4<f32>, CHUNKS>;
-    var acc_col: array<vec4<f32>, CHUNKS>;
+    var behind = 0.0;
     for (var c = 0u; c < CHANNELS; c++) {
-        v_col[c / 4u][c % 4u] = select(0.0, v_out_color[p * CHANNELS + c], inside);
-        acc_col[c / 4u][c % 4u] = T * background[c];
+        let v = select(0.0, v_out_color[p * CHANNELS + c], inside);
+        v_col[c / 4u][c % 4u] = v;
+        behind += v * T * background[c];
     }
     let v_a = select(0.0, v_out_alpha[p], inside);
 #if NORMAL_DEPTH_GRADS
@@ -507,8 +492,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #else
     let v_nd = vec4<f32>(0.0);  // no loss reads normal or depth (their upstream buffers are not bound)
 #endif
-    var acc_a = 0.0;
-    var acc_nd = vec4<f32>(0.0);
 
     let range = ranges[tile];
     let count = replay_count(range, lid, last);
@@ -543,12 +526,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let ra = 1.0 / (1.0 - alpha);
             let T_i = T * ra;
             let w = alpha * T_i;
-            var v_alpha = v_a * (T_i - acc_a * ra) + dot(v_nd, T_i * s.normal_depth - acc_nd * ra);
+            var g_out = v_a + dot(v_nd, s.normal_depth);   // the surfel's upstream-weighted output
             let sid = batch_ids[j];
             for (var c = 0u; c < CHUNKS; c++) {
-                let col = batch_color[j * CHUNKS + c];
-                v_alpha += dot(v_col[c], T_i * col - acc_col[c] * ra);
-                acc_col[c] += w * col;
+                g_out += dot(v_col[c], batch_color[j * CHUNKS + c]);
                 for (var e = 0u; e < 4u; e++) {
                     if 4u * c + e < CHANNELS {
                         add_color(sid * CHANNELS + 4u * c + e, w * v_col[c][e]);
@@ -557,7 +538,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
             var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
-            let ag = alpha_backward(ae, v_alpha);
+            let ag = alpha_backward(ae, T_i * g_out - ra * behind);
             let v_hu = cross(h_v, ag.v_p);
             let v_hv = cross(ag.v_p, h_u);
             g.v_t0 = -v_hu;
@@ -567,8 +548,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             g.v_opacity = ag.v_opacity;
             g.v_nd = w * v_nd;
             flush(sid, g);
-            acc_a += w;
-            acc_nd += w * s.normal_depth;
+            behind += w * g_out;
             T = T_i;
         }
     }
