@@ -12,6 +12,7 @@ import wgpu
 
 from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
+from gma.gpu.recycle import BufferRecycler
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
 
@@ -57,6 +58,7 @@ class GpuContext:
     transfers: TransferStats = field(default_factory=TransferStats)
     allocated_bytes: int = 0  # running total of bytes requested through buffer(); benchmarks diff it
     _pipelines: dict = field(default_factory=dict, repr=False)
+    _recycler: BufferRecycler | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
@@ -176,6 +178,13 @@ class GpuContext:
                               f"{self.max_binding_bytes} bytes; render fewer surfels or a smaller image")
         self.allocated_bytes += size
         return self.device.create_buffer(label=label, size=size, usage=usage)
+
+    @property
+    def recycler(self) -> BufferRecycler:
+        """Buffers released by per-call objects, for reuse (see gma/gpu/recycle.py)."""
+        if self._recycler is None:
+            self._recycler = BufferRecycler(self)
+        return self._recycler
 
     def upload(self, array: np.ndarray, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:
         """A new buffer holding ``array`` (C-contiguous copy made if needed); counted in transfers."""

@@ -45,7 +45,9 @@ class _RasterizeFunction(torch.autograd.Function):
     def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host,
                 replay):
         fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
-        surfels = SurfelBuffers.from_arrays(gpu, *host)  # host: float32 copies of the five surfel tensors
+        # host: float32 copies of the five surfel tensors; the buffers are recycled once the autograd graph
+        # lets go of this call (gma/gpu/recycle.py), as are the forward state's.
+        surfels = SurfelBuffers.from_arrays(gpu, *host, recycled=True)
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)

@@ -195,8 +195,8 @@ class SurfelRasterizer:
                                surfels.channels)
         scratch = self.workspace.get
 
-        def kept(label, nbytes, usage=STORAGE):
-            return ctx.buffer(nbytes, label, usage) if keep else scratch(label, nbytes, usage)
+        def kept(label, nbytes, usage=STORAGE):  # forward() gives them back with its state
+            return ctx.recycler.take(nbytes, label, usage) if keep else scratch(label, nbytes, usage)
 
         st = ProjectionState(
             params=kept("params", params.nbytes, UNIFORM),
@@ -257,11 +257,12 @@ class SurfelRasterizer:
             isect_tiles = self.workspace.get("isect_tiles", 4 * cap)
             isect_ids = self.workspace.get("isect_ids", 4 * cap)
             ranges = self.workspace.get("tile_ranges", 8 * tx * ty)
-        else:  # kept in the ForwardState for the backward pass
-            isect_ids = ctx.buffer(4 * cap, "isect_ids")
-            ranges = ctx.buffer(8 * tx * ty, "tile_ranges")
+        else:  # kept in the ForwardState for the backward pass (recycled with it, see forward)
+            take = ctx.recycler.take
+            isect_ids = take(4 * cap, "isect_ids", STORAGE)
+            ranges = take(8 * tx * ty, "tile_ranges", STORAGE)
             if self._records_for(camera, surfels.channels, capacity):
-                records = RecordIndex(ctx.buffer(4 * cap, "isect_keys"), ctx.buffer(4 * max(n, 1), "record_base"))
+                records = RecordIndex(take(4 * cap, "isect_keys", STORAGE), take(4 * max(n, 1), "record_base", STORAGE))
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
         defines = self.raster_defines(surfels.channels)
@@ -321,11 +322,12 @@ class SurfelRasterizer:
         timed_projection = list(timer.names) if timer else []
         hw = camera.width * camera.height
         def image(label, nbytes):  # kept for the backward pass, or scratch that the next render reuses
-            return ctx.buffer(nbytes, label) if replay else self.workspace.get(label, nbytes)
+            return ctx.recycler.take(nbytes, label, STORAGE) if replay else self.workspace.get(label, nbytes)
 
+        # The rasterizer writes every pixel of these (recycled buffers hold an earlier render's values).
         images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
                   image("out.depth", 4 * hw)]
-        replayed = [ctx.buffer(4 * hw, "out.final_t"), ctx.buffer(4 * hw, "out.last")] if replay else []
+        replayed = [image("out.final_t", 4 * hw), image("out.last", 4 * hw)] if replay else []
         background_buf = ctx.upload(bg, "background")
         lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
                                          images + replayed, timer)
@@ -342,8 +344,18 @@ class SurfelRasterizer:
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
         isect_ids, ranges, records = lists
-        return ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
-                            *(replayed or (None, None)), records=records)
+        state = ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
+                             *(replayed or (None, None)), records=records)
+        if replay:
+            # Its buffers serve later renders once the state is gone (a training loop then allocates
+            # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
+            # writes every surfel's tile count, and the rest is read only where tile counts, lists and
+            # ranges point, which this render wrote.
+            kept = [st.params, st.projected, st.colors4, st.tile_counts, isect_ids, ranges, *images, *replayed]
+            if records:
+                kept += [records.isect_keys, records.record_base]
+            ctx.recycler.release_with(state, kept)
+        return state
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
@@ -373,17 +385,23 @@ class SurfelRasterizer:
         # Without a loss on the normal or depth images the shader variant neither reads their upstream
         # gradients nor computes the terms they scale, so those buffers are not even allocated.
         normal_depth = v_normal is not None or v_depth is not None
+        # This call's buffers go back to the recycler when it returns (gma/gpu/recycle.py): the upstream
+        # gradients are uploaded in full and project_bwd writes every surfel's gradients. Accumulators
+        # (the atomics' v_proj and v_colors) and a missing upstream's zeros are not recycled.
+        take, recycled = ctx.recycler.take, []
         upstream = {}
         for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
                                               (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
             if binding >= 10 and not normal_depth:
                 continue
             if arr is None:
-                upstream[binding] = ctx.buffer(4 * hw * per_pixel, name)  # wgpu zero-fills new buffers
+                upstream[binding] = self._zeros(4 * hw * per_pixel)
             else:
-                upstream[binding] = ctx.upload(np.asarray(arr, np.float32).reshape(-1), name)
+                data = np.ascontiguousarray(arr, np.float32).reshape(-1)
+                upstream[binding] = take(data.nbytes, name, STORAGE)
+                ctx.write(upstream[binding], data)
+                recycled.append(upstream[binding])
         records = state.records
-        v_colors = ctx.buffer(4 * c * n, "v_colors")
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, GRAD_RECORDS=records is not None)
@@ -392,23 +410,30 @@ class SurfelRasterizer:
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
                                     state.tile_ranges, state.background, state.final_t, state.last]))
         resources.update(upstream)
+        # The subgroup variant without normal and depth gradients adds the colour gradients into their
+        # slots of v_proj (fewer rounds of atomics, see rasterize_bwd.wgsl); project_bwd copies them out.
+        # With records project_bwd writes every colour gradient. Otherwise the rasterizer's atomics add
+        # them into a zero-filled v_colors.
+        color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
+        colors_out = color_in_proj or records is not None
+        if colors_out:
+            v_colors = take(4 * c * n, "v_colors", STORAGE)
+            recycled.append(v_colors)
+        else:
+            v_colors = ctx.buffer(4 * c * n, "v_colors")
         if records:
             resources[12] = grads = self._cleared_records(enc, state.num_isects, normal_depth)
         else:
             grads = ctx.buffer(4 * 16 * n, "v_proj")
-            resources.update({12: grads, 13: v_colors})
-        # The subgroup variant without normal and depth gradients adds the colour gradients into their
-        # slots of v_proj (fewer rounds of atomics, see rasterize_bwd.wgsl); project_bwd copies them out.
-        # With records project_bwd writes every colour gradient.
-        color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
-        colors_out = color_in_proj or records is not None
+            resources[12] = grads
+            if not colors_out:
+                resources[13] = v_colors
         if defines["USE_SUBGROUPS"]:
             self._subgroup_inputs(resources, state.proj.colors4)
-        if colors_out:
-            resources.pop(13, None)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
-        outs = [ctx.buffer(4 * k * n, name) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
-                                                           ("v_opacities", 1))]
+        outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
+                                                              ("v_opacities", 1))]
+        recycled += outs
         proj_resources = dict(enumerate([state.proj.params, surfels.means, surfels.quats, surfels.scales,
                                          state.proj.tile_counts, grads, *outs]))
         if colors_out:
@@ -425,8 +450,13 @@ class SurfelRasterizer:
         means, quats, scales, opacities, colors = ctx.read_many(
             [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
              (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
+        ctx.recycler.give_back(recycled)  # read back: nothing else holds them
         return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
                            colors.reshape(n, c))
+
+    def _zeros(self, nbytes: int) -> wgpu.GPUBuffer:
+        """A zero-filled buffer of at least ``nbytes`` that nothing writes (a missing upstream gradient)."""
+        return self.workspace.get("zeros", nbytes)
 
     def _cleared_records(self, enc, num_isects: int, normal_depth: bool) -> wgpu.GPUBuffer:
         """Zeroed gradient records (flush_records in rasterize_bwd.wgsl). Scratch: backward reads the

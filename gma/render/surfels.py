@@ -8,6 +8,7 @@ import numpy as np
 import wgpu
 
 from gma.gpu import GpuContext
+from gma.gpu.context import STORAGE
 
 
 @dataclass
@@ -24,23 +25,31 @@ class SurfelBuffers:
     channels: int
 
     @staticmethod
-    def allocate(ctx: GpuContext, count: int, channels: int = 3) -> SurfelBuffers:
+    def allocate(ctx: GpuContext, count: int, channels: int = 3, recycled: bool = False) -> SurfelBuffers:
+        """Buffers for ``count`` surfels. ``recycled``: from the context's recycler, given back when the
+        object is garbage-collected (stale contents: for callers that write them all, as from_arrays does)."""
         n = max(count, 1)
-        return SurfelBuffers(
-            means=ctx.buffer(12 * n, "surfels.means"),
-            quats=ctx.buffer(16 * n, "surfels.quats"),
-            scales=ctx.buffer(8 * n, "surfels.scales"),
-            opacities=ctx.buffer(4 * n, "surfels.opacities"),
-            colors=ctx.buffer(4 * channels * n, "surfels.colors"),
+        def make(nbytes: int, label: str) -> wgpu.GPUBuffer:
+            return ctx.recycler.take(nbytes, label, STORAGE) if recycled else ctx.buffer(nbytes, label)
+
+        bufs = SurfelBuffers(
+            means=make(12 * n, "surfels.means"),
+            quats=make(16 * n, "surfels.quats"),
+            scales=make(8 * n, "surfels.scales"),
+            opacities=make(4 * n, "surfels.opacities"),
+            colors=make(4 * channels * n, "surfels.colors"),
             count=count,
             channels=channels,
         )
+        if recycled:
+            ctx.recycler.release_with(bufs, [bufs.means, bufs.quats, bufs.scales, bufs.opacities, bufs.colors])
+        return bufs
 
     @staticmethod
-    def from_arrays(ctx: GpuContext, means, quats, scales, opacities, colors) -> SurfelBuffers:
-        """Upload host arrays (numpy or CPU torch tensors) of the shapes above."""
+    def from_arrays(ctx: GpuContext, means, quats, scales, opacities, colors, recycled: bool = False) -> SurfelBuffers:
+        """Upload host arrays (numpy or CPU torch tensors) of the shapes above (``recycled``: see allocate)."""
         colors = np.asarray(colors, np.float32)
-        bufs = SurfelBuffers.allocate(ctx, len(colors), colors.shape[1])
+        bufs = SurfelBuffers.allocate(ctx, len(colors), colors.shape[1], recycled)
         bufs.write(ctx, means, quats, scales, opacities, colors)
         return bufs
 

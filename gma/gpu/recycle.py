@@ -1,0 +1,73 @@
+"""Recycled buffers for objects that live for one call or one training step (a differentiable render's
+kept state, its uploaded surfels, its gradients), so that a loop of renders stops allocating.
+
+A fresh multi-megabyte buffer is expensive on a CPU adapter: lavapipe maps new memory, every page faults
+on first touch, and wgpu zero-fills whatever a pass reads before anything wrote it. The public
+``gma.render.rasterize`` call made ~40 MB of such buffers per forward+backward step at 100k surfels
+(standard scene, lavapipe: see docs/design.md for the measured saving).
+
+The owner's buffers come back when the owner is garbage-collected (:meth:`BufferRecycler.release_with`),
+and a later ``take`` of the same size and usage hands them out again. WebGPU runs submissions in order,
+so work already queued on a released buffer finishes before a later submission writes it. A recycled
+buffer holds stale data: only buffers that the GPU fully writes before it reads them may come from here
+(zero-filled ones, such as accumulators, must be made with ``GpuContext.buffer``).
+"""
+
+from __future__ import annotations
+
+import threading
+import weakref
+from collections import OrderedDict
+
+import wgpu
+
+RECYCLE_KEEP_BYTES = 256 << 20  # released buffers kept for reuse, at most (the oldest go first)
+
+
+class BufferRecycler:
+    def __init__(self, ctx, keep_bytes: int = RECYCLE_KEEP_BYTES):
+        self.ctx = ctx
+        self.keep_bytes = keep_bytes
+        self._free: OrderedDict[int, tuple[tuple[int, int], wgpu.GPUBuffer]] = OrderedDict()  # by id, oldest first
+        self._free_bytes = 0
+        self._lock = threading.Lock()  # finalizers may run on any thread
+        self.reused = 0  # buffers handed out again (tests and benchmarks read it)
+
+    def take(self, nbytes: int, label: str, usage: int) -> wgpu.GPUBuffer:
+        """A released buffer of exactly this (rounded) size and usage, stale contents and all, or a new one
+        (``GpuContext.buffer``, which also enforces the adapter's limits)."""
+        size = max(4, (int(nbytes) + 3) // 4 * 4)
+        key = (size, int(usage))
+        with self._lock:
+            for ident in reversed(self._free):   # the most recently released first: likeliest in the caches
+                k, buf = self._free[ident]
+                if k == key:
+                    del self._free[ident]
+                    self._free_bytes -= size
+                    self.reused += 1
+                    return buf
+        return self.ctx.buffer(size, label, usage)
+
+    def release_with(self, owner, buffers) -> None:
+        """Give ``buffers`` back once ``owner`` is garbage-collected. Nothing else may hold them then."""
+        done = weakref.finalize(owner, self._give, tuple(b for b in buffers if b is not None))
+        done.atexit = False  # nothing to give back at interpreter exit
+
+    def give_back(self, buffers) -> None:
+        """Give ``buffers`` back now (their owner is done with them; queued work on them may still run)."""
+        self._give(tuple(buffers))
+
+    def _give(self, buffers: tuple[wgpu.GPUBuffer, ...]) -> None:
+        with self._lock:
+            for buf in buffers:
+                if id(buf) in self._free:  # listed twice: keep one entry
+                    continue
+                self._free[id(buf)] = ((int(buf.size), int(buf.usage)), buf)
+                self._free_bytes += int(buf.size)
+            while self._free_bytes > self.keep_bytes and self._free:
+                _, ((size, _), _) = self._free.popitem(last=False)
+                self._free_bytes -= size
+
+    @property
+    def free_bytes(self) -> int:
+        return self._free_bytes
