@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 from render_helpers import default_camera, torch_scene
@@ -78,3 +79,17 @@ def test_empty_scene_renders_background(gpu):
     assert out.color.shape == (16, 16, 3)
     assert torch.allclose(out.color, torch.tensor([0.25, 0.5, 0.75]).expand(16, 16, 3))
     assert float(out.alpha.abs().max()) == 0.0
+
+
+def test_zero_length_quaternion_rows_found_exactly():
+    """The quaternion check tests only rows whose components are all tiny, exactly as float32 squares them."""
+    from gma.render.validate import _zero_length_rows
+
+    q = np.random.default_rng(0).normal(size=(1000, 4)).astype(np.float32)
+    assert not _zero_length_rows(q)
+    for row, zero in (([0, 0, 0, 0], True), ([1e-23, 0, 0, 0], True),   # squares underflow to 0
+                      ([1e-19, 0, 0, 0], False), ([1e-18, 1e-18, 0, 0], False), ([1, 0, 0, 0], False)):
+        bad = q.copy()
+        bad[7] = row
+        assert _zero_length_rows(bad) == zero, row
+    assert not _zero_length_rows(np.zeros((0, 4), np.float32))

@@ -40,15 +40,26 @@ def host_array(t: torch.Tensor) -> np.ndarray:
 
 
 def check_finite(name: str, a: np.ndarray) -> None:
-    # A float64 sum of float32 values cannot overflow, so it is finite exactly when every value is; only
-    # a bad array is searched value by value, to name the first. (100k surfels: all five checks and the
-    # quaternion check below 1.4 against 3.0 ms a call.)
-    if np.isfinite(a.sum(dtype=np.float64)):
-        return
+    # One vectorised pass; only a bad array is searched value by value, to name the first. (100k
+    # surfels' means: 0.07 ms, against 0.26 for a float64 sum, whose finiteness says the same.)
     bad = ~np.isfinite(a)
     if bad.any():
         first = np.argwhere(bad)[0].tolist()
         raise ValueError(f"{name} holds {int(bad.sum())} non-finite values (NaN or inf), first at index {first}")
+
+
+def _zero_length_rows(q: np.ndarray) -> bool:
+    """Whether some row of ``q`` [N, 4] (float32, C-contiguous) has |q|^2 == 0 in float32, as
+    np.linalg.norm squares it. Only rows whose four components are all below 1e-18 in size can (a
+    larger one squares to >= 1e-36, which float32 holds): those are found through the row's four
+    booleans read as one 32-bit word, and checked exactly (100k rows: 0.15 against 1.0 ms for the
+    einsum over every row)."""
+    tiny = np.ascontiguousarray(np.abs(q) < 1e-18).view(np.uint32).reshape(-1)
+    candidates = tiny == 0x01010101
+    if not candidates.any():
+        return False
+    rows = q[candidates]
+    return bool((np.einsum("ij,ij->i", rows, rows) == 0).any())
 
 
 def check_surfels(means, quats, scales, opacities, colors):
@@ -78,7 +89,7 @@ def check_surfels(means, quats, scales, opacities, colors):
         check_finite(name, a)
     if n:
         q, s, o = host[1], host[2], host[3]
-        if (np.einsum("ij,ij->i", q, q) == 0).any():   # |q|^2 as np.linalg.norm squares it, in float32
+        if _zero_length_rows(q):
             raise ValueError("quats has zero-length rows; a rotation quaternion must be non-zero")
         if (s < 0).any():
             raise ValueError("scales must be >= 0 (already activated, e.g. exp of log-scales)")
