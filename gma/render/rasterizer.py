@@ -382,8 +382,8 @@ class SurfelRasterizer:
                              "backpropagate through")
         if n == 0:
             return SurfelGrads(*(np.zeros(shape, np.float32) for shape in ((0, 3), (0, 4), (0, 2), (0,), (0, c))))
-        # Without a loss on the normal or depth images the shader variant neither reads their upstream
-        # gradients nor computes the terms they scale, so those buffers are not even allocated.
+        # Without a loss on the normal or depth images (or on the alpha image) the shader variant neither
+        # reads their upstream gradients nor computes the terms they scale, so those buffers are not bound.
         normal_depth = v_normal is not None or v_depth is not None
         # This call's buffers go back to the recycler when it returns (gma/gpu/recycle.py): the upstream
         # gradients are uploaded in full and project_bwd writes every surfel's gradients. Accumulators
@@ -392,7 +392,7 @@ class SurfelRasterizer:
         upstream = {}
         for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
                                               (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
-            if binding >= 10 and not normal_depth:
+            if (binding >= 10 and not normal_depth) or (binding == 9 and arr is None):
                 continue
             if arr is None:
                 upstream[binding] = self._zeros(4 * hw * per_pixel)
@@ -404,7 +404,8 @@ class SurfelRasterizer:
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
-        defines.update(NORMAL_DEPTH_GRADS=normal_depth, GRAD_RECORDS=records is not None)
+        defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
+                       GRAD_RECORDS=records is not None)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,

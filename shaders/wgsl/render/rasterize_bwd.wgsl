@@ -3,6 +3,7 @@
 // T before each surfel as T_after / (1 - alpha). Per surfel it produces the gradients of the pixel's
 // outputs with respect to the ray transform T, the projected centre, opacity, colour, normal and depth.
 // Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG; that variant needs CHANNELS <= 4),
+// ALPHA_GRADS (false when no loss reads the alpha image: its upstream is then zero, its terms dropped),
 // NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
 // are then zero and neither summed nor scattered; the buffer entries stay zero), and GRAD_RECORDS
 // (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics; see flush_records).
@@ -12,7 +13,9 @@
 @group(0) @binding(6) var<storage, read> final_t: array<f32>;          // [H, W]
 @group(0) @binding(7) var<storage, read> last_index: array<u32>;       // [H, W]
 @group(0) @binding(8) var<storage, read> v_out_color: array<f32>;      // [H, W, CHANNELS]
+#if ALPHA_GRADS
 @group(0) @binding(9) var<storage, read> v_out_alpha: array<f32>;      // [H, W]
+#endif
 @group(0) @binding(10) var<storage, read> v_out_normal: array<f32>;    // [H, W, 3]
 @group(0) @binding(11) var<storage, read> v_out_depth: array<f32>;     // [H, W]
 
@@ -135,7 +138,11 @@ fn start_replay(pix: vec2<u32>) -> PixelReplay {
     // scratch memory by CPU drivers, making every access in the loop a gather. Below 4 channels colors4.w
     // holds the depth (DEPTH_IN_COLOR), which v_col.w = 0 cancels.
     r.v_col = select(vec4<f32>(0.0), upstream_color4(p), inside);
+#if ALPHA_GRADS
     r.v_a = select(0.0, v_out_alpha[p], inside);
+#else
+    r.v_a = 0.0;   // no loss reads the alpha image (its upstream buffer is not bound)
+#endif
     r.behind = r.T * dot(r.v_col, background4());   // the background's share of the colour (none of alpha)
 #if NORMAL_DEPTH_GRADS
     r.v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
@@ -167,7 +174,10 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
     let T_i = (*r).T * ra;
     let w = select(0.0, alpha * T_i, contrib);
     // The upstream-weighted output of this surfel (see `behind` in main's plain variant).
-    var g = dot((*r).v_col, col) + (*r).v_a;
+    var g = dot((*r).v_col, col);
+#if ALPHA_GRADS
+    g += (*r).v_a;
+#endif
 #if NORMAL_DEPTH_GRADS
     g += dot((*r).v_nd, nd);
     (*q).v_nd += w * (*r).v_nd;
@@ -485,7 +495,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         v_col[c / 4u][c % 4u] = v;
         behind += v * T * background[c];
     }
+#if ALPHA_GRADS
     let v_a = select(0.0, v_out_alpha[p], inside);
+#else
+    let v_a = 0.0;
+#endif
 #if NORMAL_DEPTH_GRADS
     let v_nd = select(vec4<f32>(0.0), vec4<f32>(v_out_normal[3u * p], v_out_normal[3u * p + 1u],
                                                    v_out_normal[3u * p + 2u], v_out_depth[p]), inside);
