@@ -77,3 +77,12 @@ def test_recycler_keeps_at_most_its_budget_and_matches_size_and_usage(gpu):
     assert recycler.take(1024, "other size", STORAGE) not in bufs
     assert recycler.take(2048, "last", STORAGE | 0) is bufs[1]
     assert recycler.free_bytes == 0
+
+
+def test_recycling_switched_off_by_environment(gpu, monkeypatch):
+    monkeypatch.setenv("GMA_RECYCLE", "0")
+    recycler = BufferRecycler(gpu)
+    first = recycler.take(1024, "a", STORAGE)
+    recycler.give_back([first])
+    assert recycler.free_bytes == 0
+    assert recycler.take(1024, "b", STORAGE) is not first

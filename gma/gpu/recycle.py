@@ -15,6 +15,7 @@ buffer holds stale data: only buffers that the GPU fully writes before it reads 
 
 from __future__ import annotations
 
+import os
 import threading
 import weakref
 from collections import OrderedDict
@@ -32,12 +33,17 @@ class BufferRecycler:
         self._free_bytes = 0
         self._lock = threading.Lock()  # finalizers may run on any thread
         self.reused = 0  # buffers handed out again (tests and benchmarks read it)
+        # GMA_RECYCLE=0: every take allocates (to rule recycling out, or to time it:
+        # `peer_compare.py --baseline . --baseline-env GMA_RECYCLE=0`).
+        self.enabled = os.environ.get("GMA_RECYCLE", "1").strip() != "0"
 
     def take(self, nbytes: int, label: str, usage: int) -> wgpu.GPUBuffer:
         """A released buffer of exactly this (rounded) size and usage, stale contents and all, or a new one
         (``GpuContext.buffer``, which also enforces the adapter's limits)."""
         size = max(4, (int(nbytes) + 3) // 4 * 4)
         key = (size, int(usage))
+        if not self.enabled:
+            return self.ctx.buffer(size, label, usage)
         with self._lock:
             for ident in reversed(self._free):   # the most recently released first: likeliest in the caches
                 k, buf = self._free[ident]
@@ -58,6 +64,8 @@ class BufferRecycler:
         self._give(tuple(buffers))
 
     def _give(self, buffers: tuple[wgpu.GPUBuffer, ...]) -> None:
+        if not self.enabled:
+            return
         with self._lock:
             for buf in buffers:
                 if id(buf) in self._free:  # listed twice: keep one entry
