@@ -4,7 +4,7 @@ kept state, its uploaded surfels, its gradients), so that a loop of renders stop
 A fresh multi-megabyte buffer is expensive on a CPU adapter: lavapipe maps new memory, every page faults
 on first touch, and wgpu zero-fills whatever a pass reads before anything wrote it. The public
 ``gma.render.rasterize`` call made ~40 MB of such buffers per forward+backward step at 100k surfels
-(standard scene, lavapipe: see docs/design.md for the measured saving).
+(standard scene, lavapipe: see docs/design.md for what recycling saves, a few per cent).
 
 The owner's buffers come back when the owner is garbage-collected (:meth:`BufferRecycler.release_with`),
 and a later ``take`` of the same size and usage hands them out again. WebGPU runs submissions in order,
