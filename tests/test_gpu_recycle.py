@@ -23,7 +23,7 @@ def _render_and_grads(gpu, scene, cam, upstream):
     return images, [p.grad.numpy().copy() for p in params]
 
 
-def test_render_on_recycled_buffers_equals_fresh_buffers(gpu):
+def test_render_on_recycled_buffers_equals_fresh_buffers(gpu, monkeypatch):
     cam = default_camera(72, 56)
     scene = torch_scene(400, seed=3)
     scene["means"][:40, 2] = -1.0      # behind the camera: culled, their gradients written as zeros
@@ -32,12 +32,9 @@ def test_render_on_recycled_buffers_equals_fresh_buffers(gpu):
     upstream = {"color": torch.from_numpy(rng.normal(size=(56, 72, 3)).astype(np.float32)),
                 "alpha": torch.from_numpy(rng.normal(size=(56, 72, 1)).astype(np.float32))}
     recycler = gpu.recycler
-    real_take = BufferRecycler.take
-    try:
-        BufferRecycler.take = lambda self, nbytes, label, usage: self.ctx.buffer(nbytes, label, usage)
+    with monkeypatch.context() as m:   # recycling off (as GMA_RECYCLE=0): fresh, zero-filled buffers
+        m.setattr(recycler, "enabled", False)
         fresh_images, fresh_grads = _render_and_grads(gpu, scene, cam, upstream)
-    finally:
-        BufferRecycler.take = real_take
     _render_and_grads(gpu, other, cam, {k: -2 * v for k, v in upstream.items()})
     gc.collect()
     before = recycler.reused
