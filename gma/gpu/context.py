@@ -12,6 +12,7 @@ import wgpu
 
 from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
+from gma.gpu.bind_groups import BindGroupCache
 from gma.gpu.recycle import BufferRecycler
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
@@ -59,6 +60,7 @@ class GpuContext:
     allocated_bytes: int = 0  # running total of bytes requested through buffer(); benchmarks diff it
     _pipelines: dict = field(default_factory=dict, repr=False)
     _recycler: BufferRecycler | None = field(default=None, repr=False)
+    bind_groups: BindGroupCache = field(default_factory=BindGroupCache, repr=False)
 
     @classmethod
     def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
@@ -145,18 +147,27 @@ class GpuContext:
 
     def bind_group(self, pipeline: wgpu.GPUComputePipeline, resources: list | dict, group: int = 0):
         """A bind group binding ``resources[i]`` at ``@binding(i)`` (a list), or each ``{binding:
-        resource}`` (a dict). A resource is a buffer, a (buffer, offset, size) range, or a texture view."""
+        resource}`` (a dict). A resource is a buffer, a (buffer, offset, size) range, or a texture view.
+        Groups of buffers only are made once and reused while those buffers live (gma/gpu/bind_groups.py)."""
         items = resources.items() if isinstance(resources, dict) else enumerate(resources)
-        entries = []
+        bindings, others = [], []
         for i, b in items:
             if isinstance(b, tuple):
-                buf, offset, size = b
-                entries.append({"binding": i, "resource": {"buffer": buf, "offset": offset, "size": size}})
+                bindings.append((i, *b))
             elif isinstance(b, wgpu.GPUBuffer):
-                entries.append({"binding": i, "resource": {"buffer": b, "offset": 0, "size": b.size}})
+                bindings.append((i, b, 0, b.size))
             else:
-                entries.append({"binding": i, "resource": b})
-        return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
+                others.append((i, b))
+
+        def create():
+            entries = [{"binding": i, "resource": {"buffer": buf, "offset": offset, "size": size}}
+                       for i, buf, offset, size in bindings]
+            entries += [{"binding": i, "resource": res} for i, res in others]
+            return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
+
+        if others:  # texture views and samplers are made per frame: nothing to reuse
+            return create()
+        return self.bind_groups.get(pipeline, group, bindings, create)
 
     def check_image_size(self, width: int, height: int, what: str = "image") -> None:
         """Refuse, before any texture is made, an image the adapter cannot hold (wgpu would abort the

@@ -1,0 +1,65 @@
+"""Reused bind groups (gma/gpu/bind_groups.py): the same buffers bound to the same pipeline give the same
+bind group, and a freed buffer's bind groups go with it, so a new buffer that Python gives the freed one's
+id never runs on the old buffer."""
+
+from __future__ import annotations
+
+import gc
+
+import numpy as np
+
+DOUBLE = """
+@group(0) @binding(0) var<storage, read> src: array<f32>;
+@group(0) @binding(1) var<storage, read_write> dst: array<f32>;
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x < arrayLength(&dst) { dst[gid.x] = 2.0 * src[gid.x]; }
+}
+"""
+
+
+def _pipeline(gpu):
+    module = gpu.device.create_shader_module(code=DOUBLE)
+    return gpu.device.create_compute_pipeline(layout="auto", compute={"module": module, "entry_point": "main"})
+
+
+def _double(gpu, pipeline, src, dst, n):
+    bind = gpu.bind_group(pipeline, [src, dst])
+    enc = gpu.device.create_command_encoder()
+    cp = enc.begin_compute_pass()
+    cp.set_pipeline(pipeline)
+    cp.set_bind_group(0, bind)
+    cp.dispatch_workgroups((n + 63) // 64)
+    cp.end()
+    gpu.submit(enc)
+    return bind, gpu.read(dst, np.float32, n)
+
+
+def test_same_buffers_reuse_one_bind_group(gpu):
+    pipeline = _pipeline(gpu)
+    values = np.arange(100, dtype=np.float32)
+    src, dst = gpu.upload(values, "src"), gpu.buffer(400, "dst")
+    hits = gpu.bind_groups.hits
+    first, out1 = _double(gpu, pipeline, src, dst, 100)
+    second, out2 = _double(gpu, pipeline, src, dst, 100)
+    assert second is first and gpu.bind_groups.hits == hits + 1
+    np.testing.assert_array_equal(out1, 2 * values)
+    np.testing.assert_array_equal(out2, 2 * values)
+    # Another range of the same buffer is another bind group.
+    ranged = gpu.bind_group(pipeline, [(src, 256, 144), dst])
+    assert ranged is not first
+
+
+def test_freed_buffer_takes_its_bind_groups_along(gpu):
+    pipeline = _pipeline(gpu)
+    dst = gpu.buffer(256, "dst")
+    for k in range(12):   # buffers die and are made again: Python often hands out the same id
+        values = np.full(64, float(k), np.float32)
+        src = gpu.upload(values, "src")
+        size_before = len(gpu.bind_groups)
+        _, out = _double(gpu, pipeline, src, dst, 64)
+        np.testing.assert_array_equal(out, 2 * values)   # never the previous buffer's values
+        assert len(gpu.bind_groups) == size_before + 1
+        del src
+        gc.collect()
+        assert len(gpu.bind_groups) == size_before   # the entry went with its buffer
