@@ -44,6 +44,7 @@ def bench(ctx, name, scene_np, cam, repeats):
     scene = {k: torch.from_numpy(v) for k, v in scene_np.items()}
     step(ctx, scene, cam)  # compile pipelines
     walls, transfers = [], []
+    ctx.transfers.wait_for_compute = True   # download times without the compute queued before them
     alloc0 = ctx.allocated_bytes
     for _ in range(repeats):
         ctx.transfers.reset()

@@ -229,8 +229,8 @@ class GpuContext:
         total = int(offsets[-1])
         if total == 0:
             return [np.zeros(0, dtype) for _, dtype, _ in items]
-        # Wait for queued work first, so that the transfer timing counts the copy and not the compute.
-        self.wait_idle()
+        if self.transfers.wait_for_compute:   # so that the transfer timing counts the copy, not the compute
+            self.wait_idle()
         with _staging_lock, self.transfers.download(total):
             # Kept and reused up to 64 MiB: a fresh multi-megabyte staging buffer per read costs lavapipe
             # an allocation, its page faults and wgpu's zero-fill.

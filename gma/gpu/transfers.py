@@ -12,8 +12,11 @@ class TransferStats:
     """Running totals of host→GPU uploads and GPU→host downloads (bytes, seconds, calls).
 
     Upload time is the time to hand data to the queue (the copy into the driver's staging memory).
-    Download time in ``GpuContext.read_many`` starts after queued compute has finished, so it is the copy
-    and map alone; ``GpuContext.read`` cannot separate the two and includes the wait."""
+    Download time includes waiting for the compute queued before the read, unless ``wait_for_compute``
+    is set: then ``GpuContext.read_many`` first waits for that work outside the timing, so that its
+    download time is the copy and map alone. That wait is one more round trip to the device (a fence
+    read: 1-3 % of a public forward+backward step on lavapipe, standard scene), so only benchmarks that
+    report transfer times set it; ``GpuContext.read`` always includes the wait."""
 
     bytes_up: int = 0
     bytes_down: int = 0
@@ -21,6 +24,7 @@ class TransferStats:
     seconds_down: float = 0.0
     calls_up: int = 0
     calls_down: int = 0
+    wait_for_compute: bool = False
 
     @contextmanager
     def upload(self, nbytes: int):
@@ -39,7 +43,7 @@ class TransferStats:
         self.calls_down += 1
 
     def reset(self) -> None:
-        self.__init__()
+        self.__init__(wait_for_compute=self.wait_for_compute)
 
     def summary(self) -> str:
         return (
