@@ -256,11 +256,13 @@ def test_public_render_under_no_grad_keeps_no_replay_state(gpu, monkeypatch):
     assert torch.equal(quiet.color, graded.color.detach())
 
 
-def test_forward_sized_by_earlier_renders_runs_again_when_they_fall_short(gpu):
+@pytest.mark.parametrize("read_images", [False, True])
+def test_forward_sized_by_earlier_renders_runs_again_when_they_fall_short(gpu, read_images):
     """forward sizes the part after projection by what earlier renders needed (intersection capacity,
     depth-sort key bits) and runs it again with exact sizes when a render needs more: a first render
     and then a scene with more intersections and a wider depth range match a rasterizer that had
-    already seen them, bit for bit, and the hints only grow."""
+    already seen them, bit for bit, and the hints only grow. With read_images the images read together
+    with the counts are those of the run that counted (after a rerun, the rerun's)."""
     from gma.render import read_outputs
 
     def buffers_of(scene):
@@ -279,7 +281,8 @@ def test_forward_sized_by_earlier_renders_runs_again_when_they_fall_short(gpu):
     most, bits_seen = 16, []
     for b in (flat, dense, flat):
         bits = fresh.depth_bits_hint
-        state = fresh.forward(b, cam)
+        state = fresh.forward(b, cam, read_images=read_images)
+        assert (state.host_images is not None) == read_images
         bits_seen.append(fresh.depth_bits_hint)
         most = max(most, state.num_isects)
         assert fresh.isect_capacity_hint == most and fresh.depth_bits_hint >= bits

@@ -51,7 +51,7 @@ class _RasterizeFunction(torch.autograd.Function):
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
-        state = rast.forward(surfels, camera, bg, replay=replay)
+        state = rast.forward(surfels, camera, bg, replay=replay, read_images=True)
         out = read_outputs(gpu, state)
         fctx.state, fctx.surfels, fctx.rast = state, surfels, rast
         fctx.device = means.device

@@ -81,6 +81,7 @@ class ForwardState:
     final_t: wgpu.GPUBuffer | None  # [H, W] (None: rendered with replay=False)
     last: wgpu.GPUBuffer | None     # [H, W] contributors per pixel (u32)
     records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
+    host_images: ImageOutputs | None = None  # read with the render's counts (forward(read_images=True))
 
 
 def _record_bytes(num_isects: int, normal_depth: bool) -> int:
@@ -298,7 +299,7 @@ class SurfelRasterizer:
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
-                timer: PassTimer | None = None, replay: bool = True) -> ForwardState:
+                timer: PassTimer | None = None, replay: bool = True, read_images: bool = False) -> ForwardState:
         """Render (read the images with :func:`read_outputs`). With ``replay`` (the default) the state
         keeps freshly allocated buffers, everything :meth:`backward` needs. Without it the images land
         in scratch buffers that the next render overwrites (read them first), nothing for a backward
@@ -312,7 +313,9 @@ class SurfelRasterizer:
         it reads projection's counts: when this render needed more, the part after projection runs
         again with exact sizes (the first render, or a larger scene) and the hints grow. (Reading them
         between the submissions left the GPU idle while the second part was encoded: standard scene,
-        100k surfels, lavapipe, ~4 ms of ~110.)"""
+        100k surfels, lavapipe, ~4 ms of ~110.) With ``read_images`` the images come back in the same
+        transfer as the counts (one device round trip fewer; read again after a rerun), and
+        :func:`read_outputs` returns them."""
         ctx, n, c = self.ctx, surfels.count, surfels.channels
         bg = np.zeros(c, np.float32) if background is None else np.asarray(background, np.float32)
         capacity, key_bits = self.isect_capacity_hint, self.depth_bits_hint
@@ -331,7 +334,11 @@ class SurfelRasterizer:
         background_buf = ctx.upload(bg, "background")
         lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
                                          images + replayed, timer)
-        stats = ctx.read(st.stats, np.uint32, 4) if n else np.zeros(4, np.uint32)
+        image_reads = _image_reads(images, camera, c) if read_images else []
+        if n:
+            stats, *host = ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
+        else:
+            stats, host = np.zeros(4, np.uint32), ctx.read_many(image_reads)
         num_isects, needed_bits = int(stats[1]), depth_key_bits(stats)
         # Exact from here on: the backward's passes bound the intersection lists by it.
         ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
@@ -340,12 +347,14 @@ class SurfelRasterizer:
                 timer.names = timed_projection
             lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
                                              images + replayed, timer)
+            host = ctx.read_many(image_reads)
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
         isect_ids, ranges, records = lists
         state = ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
-                             *(replayed or (None, None)), records=records)
+                             *(replayed or (None, None)), records=records,
+                             host_images=_images_from(host, camera, c) if read_images else None)
         if replay:
             # Its buffers serve later renders once the state is gone (a training loop then allocates
             # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
@@ -532,10 +541,23 @@ class ImageOutputs:
 
 
 def read_outputs(ctx: GpuContext, state: ForwardState) -> ImageOutputs:
-    """Copy a forward render's images back to the host in one transfer."""
-    h, w, c = state.camera.height, state.camera.width, state.channels
-    color, alpha, normal, depth = ctx.read_many([(state.color, np.float32, h * w * c), (state.alpha, np.float32, h * w),
-                                                 (state.normal, np.float32, h * w * 3),
-                                                 (state.depth, np.float32, h * w)])
-    return ImageOutputs(color.reshape(h, w, c), alpha.reshape(h, w, 1), normal.reshape(h, w, 3),
+    """Copy a forward render's images back to the host in one transfer (or return those that
+    ``forward(read_images=True)`` read already)."""
+    if state.host_images is not None:
+        return state.host_images
+    images = [state.color, state.alpha, state.normal, state.depth]
+    return _images_from(ctx.read_many(_image_reads(images, state.camera, state.channels)), state.camera,
+                        state.channels)
+
+
+def _image_reads(images: list, camera: Camera, channels: int) -> list:
+    """read_many items of the (color, alpha, normal, depth) image buffers."""
+    hw = camera.width * camera.height
+    return [(buf, np.float32, hw * k) for buf, k in zip(images, (channels, 1, 3, 1))]
+
+
+def _images_from(arrays: list[np.ndarray], camera: Camera, channels: int) -> ImageOutputs:
+    h, w = camera.height, camera.width
+    color, alpha, normal, depth = arrays
+    return ImageOutputs(color.reshape(h, w, channels), alpha.reshape(h, w, 1), normal.reshape(h, w, 3),
                         depth.reshape(h, w, 1))
