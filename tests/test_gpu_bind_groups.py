@@ -63,3 +63,54 @@ def test_freed_buffer_takes_its_bind_groups_along(gpu):
         del src
         gc.collect()
         assert len(gpu.bind_groups) == size_before   # the entry went with its buffer
+
+
+class _FakeBuffer:
+    """Stands in for a GPUBuffer in the cache's bookkeeping (any weak-referenceable object)."""
+
+
+def test_new_buffer_with_a_dead_buffers_id_gets_its_own_bind_group():
+    """Python hands a freed object's id to the next object of its size at once; the cache must notice
+    that the id now names another buffer even before it has dropped the dead buffer's entries."""
+    from gma.gpu.bind_groups import BindGroupCache
+
+    cache, pipeline = BindGroupCache(), object()
+    made = []
+
+    def create():
+        made.append(object())
+        return made[-1]
+
+    old = _FakeBuffer()
+    old_id = id(old)
+    first = cache.get(pipeline, 0, [(0, old, 0, 16)], create)
+    assert cache.get(pipeline, 0, [(0, old, 0, 16)], create) is first and len(made) == 1
+    del old
+    cache._dead.clear()   # as if the freed buffer's callback had not been seen yet
+    new = _FakeBuffer()
+    assert id(new) == old_id, "CPython reuses a freed object's id for the next one of its size"
+    second = cache.get(pipeline, 0, [(0, new, 0, 16)], create)
+    assert second is not first and len(made) == 2
+    assert cache.get(pipeline, 0, [(0, new, 0, 16)], create) is second and len(cache) == 1
+
+
+def test_buffer_freed_while_the_cache_holds_its_lock_does_not_deadlock():
+    """A buffer can die inside a lookup (garbage collection on the same thread): its callback must not
+    wait for the lock; the next lookup drops its entry."""
+    import threading
+
+    from gma.gpu.bind_groups import BindGroupCache
+
+    cache, pipeline = BindGroupCache(), object()
+    holder = [_FakeBuffer()]
+    cache.get(pipeline, 0, [(0, holder[0], 0, 16)], object)
+
+    def busy_then_free():
+        with cache._lock:
+            holder.clear()   # the buffer's weakref callback runs now, on this thread
+
+    worker = threading.Thread(target=busy_then_free, daemon=True)
+    worker.start()
+    worker.join(10)
+    assert not worker.is_alive(), "the callback waited for the lock its own thread held"
+    assert len(cache) == 0

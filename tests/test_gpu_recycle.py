@@ -4,6 +4,7 @@ render on buffers that still hold another scene's values gives exactly what fres
 from __future__ import annotations
 
 import gc
+import threading
 
 import numpy as np
 import torch
@@ -83,3 +84,27 @@ def test_recycling_switched_off_by_environment(gpu, monkeypatch):
     recycler.give_back([first])
     assert recycler.free_bytes == 0
     assert recycler.take(1024, "b", STORAGE) is not first
+
+
+def test_owner_collected_while_the_recycler_holds_its_lock_does_not_deadlock(gpu):
+    """Garbage collection can free an owner in the middle of take() on the same thread; its finalizer
+    must not wait for the lock that thread holds."""
+    recycler = BufferRecycler(gpu)
+
+    class Owner:
+        pass
+
+    bufs = [recycler.take(2048, "b", STORAGE)]
+    holder = [Owner()]
+    recycler.release_with(holder[0], bufs)
+
+    def busy_then_collect():
+        with recycler._lock:   # as inside take() when a collection frees the owner
+            holder.clear()     # the owner's finalizer runs now, on this thread
+
+    worker = threading.Thread(target=busy_then_collect, daemon=True)
+    worker.start()
+    worker.join(10)
+    assert not worker.is_alive(), "the finalizer waited for the lock its own thread held"
+    assert recycler.free_bytes == 2048
+    assert recycler.take(2048, "again", STORAGE) is bufs[0]

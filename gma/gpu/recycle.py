@@ -31,7 +31,11 @@ class BufferRecycler:
         self.keep_bytes = keep_bytes
         self._free: OrderedDict[int, tuple[tuple[int, int], wgpu.GPUBuffer]] = OrderedDict()  # by id, oldest first
         self._free_bytes = 0
-        self._lock = threading.Lock()  # finalizers may run on any thread
+        self._lock = threading.Lock()
+        # Buffers of owners that were garbage-collected, not yet listed as free. A finalizer may run inside
+        # garbage collection on a thread that holds the lock (in take), so it only appends here
+        # (list.append takes no lock) and the next call under the lock lists them.
+        self._released: list[tuple[wgpu.GPUBuffer, ...]] = []
         self.reused = 0  # buffers handed out again (tests and benchmarks read it)
         # GMA_RECYCLE=0: every take allocates (to rule recycling out, or to time it:
         # `peer_compare.py --baseline . --baseline-env GMA_RECYCLE=0`).
@@ -42,21 +46,21 @@ class BufferRecycler:
         (``GpuContext.buffer``, which also enforces the adapter's limits)."""
         size = max(4, (int(nbytes) + 3) // 4 * 4)
         key = (size, int(usage))
-        if not self.enabled:
-            return self.ctx.buffer(size, label, usage)
         with self._lock:
-            for ident in reversed(self._free):   # the most recently released first: likeliest in the caches
-                k, buf = self._free[ident]
-                if k == key:
-                    del self._free[ident]
-                    self._free_bytes -= size
-                    self.reused += 1
-                    return buf
+            self._list_released()
+            if self.enabled:
+                for ident in reversed(self._free):   # the most recently released first: likeliest in the caches
+                    k, buf = self._free[ident]
+                    if k == key:
+                        del self._free[ident]
+                        self._free_bytes -= size
+                        self.reused += 1
+                        return buf
         return self.ctx.buffer(size, label, usage)
 
     def release_with(self, owner, buffers) -> None:
         """Give ``buffers`` back once ``owner`` is garbage-collected. Nothing else may hold them then."""
-        done = weakref.finalize(owner, self._give, tuple(b for b in buffers if b is not None))
+        done = weakref.finalize(owner, self._released.append, tuple(b for b in buffers if b is not None))
         done.atexit = False  # nothing to give back at interpreter exit
 
     def give_back(self, buffers) -> None:
@@ -64,9 +68,18 @@ class BufferRecycler:
         self._give(tuple(buffers))
 
     def _give(self, buffers: tuple[wgpu.GPUBuffer, ...]) -> None:
-        if not self.enabled:
-            return
         with self._lock:
+            self._list_released()
+            self._list_free(buffers)
+
+    def _list_released(self) -> None:
+        """List the garbage-collected owners' buffers as free, in the order they came (lock held)."""
+        while self._released:
+            self._list_free(self._released.pop(0))
+
+    def _list_free(self, buffers: tuple[wgpu.GPUBuffer, ...]) -> None:
+        """(lock held)"""
+        if self.enabled:
             for buf in buffers:
                 if id(buf) in self._free:  # listed twice: keep one entry
                     continue
@@ -78,4 +91,6 @@ class BufferRecycler:
 
     @property
     def free_bytes(self) -> int:
-        return self._free_bytes
+        with self._lock:
+            self._list_released()
+            return self._free_bytes
