@@ -145,7 +145,7 @@ class SurfelRasterizer:
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
         sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
         per_surfel = 4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 68 + 16 * ((channels + 3) // 4)
-        batch = 256
+        batch = 256  # at most: the subgroup path packs a hit's batch slot into 8 bits (hit_entry)
         fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
         while batch > 32 and batch * per_surfel + fixed > limit:
             batch //= 2
