@@ -380,7 +380,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         for (var hh = 0u; hh < num_hits; hh += SG) {
             let h0 = num_hits - min(num_hits, hh + SG);   // this chunk covers list entries [h0, num_hits - hh)
             let n = num_hits - hh - h0;
-            let mine_hit = hit_slots[row + min(h0 + sg_lane, num_hits - 1u)];
+            let mine_hit = hit_entries[row + min(h0 + sg_lane, num_hits - 1u)];
             let mine_slot = hit_slot(mine_hit);
             let mine_id = hit_surfel(mine_hit);
             // Field by field: the normal and depth are read only when their gradients are wanted (against

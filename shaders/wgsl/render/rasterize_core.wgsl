@@ -22,7 +22,7 @@
 // entries of scratch (see list_hits). Only the subgroup's own lanes
 // write and read its row, with no barrier between: a CPU driver runs a subgroup as one SIMD thread, in
 // program order (this variant serves CPU drivers only).
-var<workgroup> hit_slots: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
+var<workgroup> hit_entries: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 
 // Votes, ballots and reductions over the subgroup from xor-shuffles. Lavapipe runs subgroupBallot,
 // subgroupAny, subgroupAll and subgroupOr/Max as a loop over the lanes whose counter and result live in
@@ -65,18 +65,6 @@ fn all_lanes(pred: bool) -> bool {
     return subgroupBroadcast(lanes_or(u32(!pred)), 0u) == 0u;
 }
 
-// Write, in slot order, the intersections among the `m` from list index `start` whose block bits
-// (block_bits.wgsl) meet `blocks` into hit_slots[row..] (hit_entry: the id read here comes along, so the
-// hit loops need not read it again: a gather is a loop over the lanes on lavapipe; standard scene, both in
-// one process, interleaved, two runs: forward rasterize 0.952x / 0.985x, backward 0.947x / 0.983x,
-// bit-identical); returns their number (the same in every lane).
-// Every lane stores,
-// the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
-// divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
-// the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
-// -8 to -10 %, backward -2 to -5 %). Tried and no faster: per-subgroup hit bitsets built while staging
-// (ballots or xor-shuffles) so that listing reads a word per SG slots at a uniform address; the build
-// cost what the gathers saved.
 // A listed hit: surfel id (below 2^24) and slot in the batch (below BATCH <= 256) in one word.
 fn hit_entry(isect_id: u32, slot: u32) -> u32 {
     return ((isect_id & SURFEL_ID_MASK) << 8u) | slot;
@@ -90,6 +78,18 @@ fn hit_surfel(entry: u32) -> u32 {
     return entry >> 8u;
 }
 
+// Write, in slot order, the intersections among the `m` from list index `start` whose block bits
+// (block_bits.wgsl) meet `blocks` into hit_entries[row..] (hit_entry: the id read here comes along, so the
+// hit loops need not read it again: a gather is a loop over the lanes on lavapipe; standard scene, both in
+// one process, interleaved, two runs: forward rasterize 0.952x / 0.985x, backward 0.947x / 0.983x,
+// bit-identical); returns their number (the same in every lane).
+// Every lane stores,
+// the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
+// divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
+// the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
+// -8 to -10 %, backward -2 to -5 %). Tried and no faster: per-subgroup hit bitsets built while staging
+// (ballots or xor-shuffles) so that listing reads a word per SG slots at a uniform address; the build
+// cost what the gathers saved.
 fn list_hits(start: u32, m: u32, blocks: u32, row: u32, sg_lane: u32) -> u32 {
     var count = 0u;
     for (var j = 0u; j < m; j += SG) {
@@ -99,7 +99,7 @@ fn list_hits(start: u32, m: u32, blocks: u32, row: u32, sg_lane: u32) -> u32 {
         let hits = lanes_ballot(hit, sg_lane);
         let below = countOneBits(hits & ((1u << sg_lane) - 1u));
         let total = countOneBits(hits);
-        hit_slots[row + count + select(total + sg_lane - below, below, hit)] = hit_entry(id, slot);
+        hit_entries[row + count + select(total + sg_lane - below, below, hit)] = hit_entry(id, slot);
         count += total;
     }
     return count;
@@ -277,7 +277,7 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // (standard scene, 100k surfels, this pass on lavapipe: 133 ms with one pixel per thread, 102 with two,
 // 96 with four). A surfel whose footprint (block mask) misses the subgroup's block is skipped by the
 // whole subgroup at once: the intersections that can touch it first go, in order, into its row of
-// hit_slots, and only then is surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
+// hit_entries, and only then is surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
 // least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
 // of ~4x as many steps: standard scene, 100k surfels, forward pass -5 %, backward pass -20 %.)
 // Tried, standard and avatar-like scenes, 100k surfels, same runs against the shuffles: reading each
@@ -460,7 +460,7 @@ fn composite_quad(tile: u32, pix: vec2<u32>, sg_lane: u32, sg_id: u32,
             if all_lanes(is_done(*a) && is_done(*b) && is_done(*c) && is_done(*d)) {
                 break;
             }
-            let mine_hit = hit_slots[row + min(h + sg_lane, num_hits - 1u)];
+            let mine_hit = hit_entries[row + min(h + sg_lane, num_hits - 1u)];
             let mine_slot = hit_slot(mine_hit);
             let mine_sid = hit_surfel(mine_hit);
             let mine = projected[mine_sid];
