@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import wgpu
@@ -50,6 +50,9 @@ class ProjectionState:
     stats: wgpu.GPUBuffer         # [4] u32: [0], [1] intersections wanted, [2] min and [3] max depth key
     sort_info: wgpu.GPUBuffer     # DispatchInfo of the intersection sort (count clamped to capacity)
     elem_info: wgpu.GPUBuffer     # DispatchInfo of per-intersection passes
+    # Those of the above taken from the recycler for the caller to keep (project(keep=True)); forward()
+    # gives them back with its state.
+    kept: list[wgpu.GPUBuffer] = field(default_factory=list)
 
 
 @dataclass
@@ -195,9 +198,13 @@ class SurfelRasterizer:
         params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
                                surfels.channels)
         scratch = self.workspace.get
+        taken: list[wgpu.GPUBuffer] = []
 
-        def kept(label, nbytes, usage=STORAGE):  # forward() gives them back with its state
-            return ctx.recycler.take(nbytes, label, usage) if keep else scratch(label, nbytes, usage)
+        def kept(label, nbytes, usage=STORAGE):
+            if not keep:
+                return scratch(label, nbytes, usage)
+            taken.append(ctx.recycler.take(nbytes, label, usage))
+            return taken[-1]
 
         st = ProjectionState(
             params=kept("params", params.nbytes, UNIFORM),
@@ -212,6 +219,7 @@ class SurfelRasterizer:
             stats=scratch("stats", 16),
             sort_info=scratch("isect_sort.info", 16, INDIRECT),
             elem_info=scratch("isect_elem.info", 16, INDIRECT),
+            kept=taken,
         )
         ctx.write(st.params, params)
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
@@ -360,7 +368,7 @@ class SurfelRasterizer:
             # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
             # writes every surfel's tile count, and the rest is read only where tile counts, lists and
             # ranges point, which this render wrote.
-            kept = [st.params, st.projected, st.colors4, st.tile_counts, isect_ids, ranges, *images, *replayed]
+            kept = [*st.kept, isect_ids, ranges, *images, *replayed]
             if records:
                 kept += [records.isect_keys, records.record_base]
             ctx.recycler.release_with(state, kept)
