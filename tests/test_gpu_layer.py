@@ -1,11 +1,15 @@
-"""The GPU layer: adapter choice, WGSL loader (includes, defines, conditionals, error report)."""
+"""The GPU layer: adapter choice, WGSL loader (includes, defines, conditionals, error report), cached
+constants and read-backs."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+import wgpu
 
-from gma.gpu import ShaderCompileError, ShaderLibrary
+from gma.gpu import ShaderCompileError, ShaderLibrary, context
 from gma.gpu.adapter import NoAdapterError, select_adapter
+from gma.gpu.context import STORAGE
 
 
 def write(root, name, text):
@@ -90,3 +94,23 @@ def test_workspace_reuses_and_grows(gpu):
     b = ws.get("scratch", 1000)
     assert b is not a and b.size >= 1000
     assert ws.nbytes == b.size
+
+
+def test_constants_are_shared_per_value_and_usage(gpu):
+    a = gpu.constant(np.array([3, 0, 0, 0], np.uint32), "a")
+    assert gpu.constant(np.array([3, 0, 0, 0], np.uint32), "again") is a
+    assert gpu.constant(np.array([4, 0, 0, 0], np.uint32), "other value") is not a
+    assert gpu.constant(np.array([3, 0, 0, 0], np.uint32), "other usage", STORAGE | wgpu.BufferUsage.UNIFORM) is not a
+    np.testing.assert_array_equal(gpu.read(a, np.uint32), [3, 0, 0, 0])
+    with pytest.raises(ValueError, match="4 KiB"):
+        gpu.constant(np.zeros(1025, np.float32), "too large")
+
+
+def test_large_reads_copied_on_two_threads_are_exact(gpu):
+    rng = np.random.default_rng(2)
+    big = rng.integers(0, 2**32, size=(context.PARALLEL_COPY_BYTES + 12_345) // 4, dtype=np.uint32)
+    small = rng.normal(size=777).astype(np.float32)
+    got_big, got_small = gpu.read_many([(gpu.upload(big, "big"), np.uint32, big.size),
+                                        (gpu.upload(small, "small"), np.float32, small.size)])
+    np.testing.assert_array_equal(got_big, big)
+    np.testing.assert_array_equal(got_small, small)

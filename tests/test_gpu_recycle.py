@@ -108,3 +108,39 @@ def test_owner_collected_while_the_recycler_holds_its_lock_does_not_deadlock(gpu
     assert not worker.is_alive(), "the finalizer waited for the lock its own thread held"
     assert recycler.free_bytes == 2048
     assert recycler.take(2048, "again", STORAGE) is bufs[0]
+
+
+def test_gradient_records_left_zeroed_for_the_next_backward(gpu, monkeypatch):
+    """On lavapipe each backward zeroes its gradient records after reading the gradients, so that the
+    next backward skips the clear (SurfelRasterizer._clear_records_for_next). A run of backwards with
+    growing and shrinking record sizes (more intersections; normal and depth losses add colour slots)
+    must give exactly what a fresh rasterizer, which clears first, gives for each."""
+    from gma.render import api
+
+    rast = api.rasterizer_for(gpu)
+    if not rast.use_grad_records:
+        return   # records are the lavapipe path; elsewhere the atomics' buffers are fresh per call
+    cam = default_camera(64, 48)
+    rng = np.random.default_rng(1)
+
+    def step(scene, with_normal_depth):
+        params = [scene[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")]
+        out = rasterize(*params, torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K), cam.width, cam.height,
+                        ctx=gpu)
+        loss = (out.color * upstream["color"]).sum()
+        if with_normal_depth:
+            loss = loss + (out.normal * upstream["normal"]).sum() + (out.depth * upstream["depth"]).sum()
+        loss.backward()
+        return [p.grad.numpy().copy() for p in params]
+
+    upstream = {k: torch.from_numpy(rng.normal(size=(48, 64, c)).astype(np.float32))
+                for k, c in (("color", 3), ("normal", 3), ("depth", 1))}
+    small, large = torch_scene(150, seed=11), torch_scene(600, seed=12)
+    for scene, normal_depth in ((small, False), (large, False), (large, True), (small, True), (large, False)):
+        grads = step(scene, normal_depth)
+        assert rast._zeroed_records is not None, "the records should be left zeroed for the next backward"
+        with monkeypatch.context() as m:   # a fresh rasterizer: fresh records, cleared before use
+            m.setattr(api, "_rasterizers", {})
+            fresh = step(scene, normal_depth)
+        for name, got, want in zip(("means", "quats", "scales", "opacities", "colors"), grads, fresh):
+            np.testing.assert_array_equal(got, want, err_msg=name)

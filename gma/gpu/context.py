@@ -4,7 +4,10 @@ for a global device."""
 
 from __future__ import annotations
 
+import os
 import threading
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,6 +44,7 @@ RAISED_LIMITS = (
 )
 
 STORAGE = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.COPY_SRC | wgpu.BufferUsage.COPY_DST
+CONSTANT_CACHE_ENTRIES = 64  # GpuContext.constant
 STAGING_KEEP_BYTES = 64 << 20  # read_many keeps its staging buffer for reuse up to this size
 
 
@@ -61,6 +65,8 @@ class GpuContext:
     _pipelines: dict = field(default_factory=dict, repr=False)
     _recycler: BufferRecycler | None = field(default=None, repr=False)
     bind_groups: BindGroupCache = field(default_factory=BindGroupCache, repr=False)
+    _constants: OrderedDict = field(default_factory=OrderedDict, repr=False)
+    _constants_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     @classmethod
     def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
@@ -204,6 +210,28 @@ class GpuContext:
         self.write(buf, data)
         return buf
 
+    def constant(self, array: np.ndarray, label: str, usage: int = STORAGE) -> wgpu.GPUBuffer:
+        """A buffer holding ``array``'s bytes that nobody writes again, shared by every caller asking for
+        the same bytes and usage. Small per-call values (a scan's count, a render's background) then bind
+        the same buffer call after call, so their bind groups are found in the cache instead of made again
+        (wgpu-native: ~0.15 ms each), and no buffer is created or uploaded. Callers must never write to
+        it. At most CONSTANT_CACHE_ENTRIES (least recently used go) of up to 4 KiB each."""
+        data = np.ascontiguousarray(array)
+        if data.nbytes > 4096:
+            raise ValueError(f"constant {label!r}: {data.nbytes} bytes, over the 4 KiB of a cached constant")
+        key = (int(usage), data.tobytes())
+        with self._constants_lock:
+            buf = self._constants.get(key)
+            if buf is not None:
+                self._constants.move_to_end(key)
+                return buf
+        buf = self.upload(data, label, usage)
+        with self._constants_lock:
+            buf = self._constants.setdefault(key, buf)
+            while len(self._constants) > CONSTANT_CACHE_ENTRIES:
+                self._constants.popitem(last=False)
+        return buf
+
     def write(self, buffer: wgpu.GPUBuffer, array: np.ndarray, offset: int = 0) -> None:
         data = np.ascontiguousarray(array)
         if data.nbytes == 0:
@@ -247,7 +275,7 @@ class GpuContext:
             self.device.queue.submit([enc.finish()])
             staging.map_sync(wgpu.MapMode.READ, 0, total)
             # One copy out of the mapping (read_mapped's default would make one more).
-            raw = np.frombuffer(staging.read_mapped(0, total, copy=False), np.uint8).copy()
+            raw = _copy_out(np.frombuffer(staging.read_mapped(0, total, copy=False), np.uint8))
             staging.unmap()
         return [raw[off:off + n].view(np.dtype(dtype)) for (_, dtype, _), off, n in zip(items, offsets, sizes)]
 
@@ -261,6 +289,27 @@ class GpuContext:
 
     def submit(self, encoder: wgpu.GPUCommandEncoder) -> None:
         self.device.queue.submit([encoder.finish()])
+
+
+PARALLEL_COPY_BYTES = 2 << 20  # read_many copies larger reads out of the mapping on two threads
+_copy_pool: ThreadPoolExecutor | None = None
+
+
+def _copy_out(mapped: np.ndarray) -> np.ndarray:
+    """A copy of ``mapped``; a large one in two halves, one on a helper thread (numpy releases the GIL
+    while copying). The device idles while the host copies a read back out of the mapping, so the
+    second core is free: standard scene on lavapipe, 8.4 MB of images 0.70 -> 0.45 ms in isolation."""
+    global _copy_pool
+    if mapped.nbytes < PARALLEL_COPY_BYTES or (os.cpu_count() or 1) < 2:
+        return mapped.copy()
+    if _copy_pool is None:
+        _copy_pool = ThreadPoolExecutor(1, thread_name_prefix="gma-copy")
+    out = np.empty_like(mapped)
+    half = mapped.size // 2 // 4096 * 4096
+    second = _copy_pool.submit(np.copyto, out[half:], mapped[half:])
+    np.copyto(out[:half], mapped[:half])
+    second.result()
+    return out
 
 
 _shared: GpuContext | None = None

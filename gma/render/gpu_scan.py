@@ -26,10 +26,11 @@ class ExclusiveScan:
         if count == 0:
             return
         blocks = (count + SCAN_BLOCK - 1) // SCAN_BLOCK
-        # Scratch per recursion level. The 16-byte uniform is fresh per call: queue writes land before the
-        # whole submission, so a shared one would break two scans encoded into one submission.
+        # Scratch per recursion level. The 16-byte uniform is a constant of the count, never rewritten: queue
+        # writes land before the whole submission, so a rewritten shared one would break two scans encoded
+        # into one submission.
         sums = self.workspace.get(f"scan.block_sums.{level}", 4 * blocks)
-        params = ctx.upload(np.array([count, 0, 0, 0], np.uint32), "scan.params", UNIFORM)
+        params = ctx.constant(np.array([count, 0, 0, 0], np.uint32), "scan.params", UNIFORM)
         gather = index is not None
         blocks_p = ctx.compute_pipeline("render/scan_blocks.wgsl", {"GATHER": gather})
         bind = [params, values, index if gather else values, out, sums]
