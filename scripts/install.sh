@@ -3,8 +3,9 @@
 # - a Vulkan driver: Mesa's lavapipe (CPU) when no Vulkan ICD is present, xvfb for window tests;
 # - torch pinned first, so that the CPU wheel is used instead of the multi-GB CUDA build;
 # - this package in editable mode, with the SMPL-X, viewer (Dear ImGui), cluster (Ray, for gma batch) and dev extras;
-# - on Debian 12, Mesa 25's lavapipe from bookworm-backports in GMA's cache (`gma lavapipe install`: checked
-#   against Debian's signed index, nothing on the system changes; GMA_LAVAPIPE=system skips it).
+# - on Debian 12, Mesa 25's lavapipe from bookworm-backports, on Debian 13 Mesa 26's from trixie-backports, in
+#   GMA's cache (`gma lavapipe install`: checked against Debian's signed index, the system's Mesa stays as it is;
+#   GMA_LAVAPIPE=system skips it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -43,7 +44,11 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     touch "$stamp"
 fi
 
-# Debian 12's own lavapipe (Mesa 22.3) renders markedly slower (docs/design.md); offline, the system's is used.
-if ! "$PY" -m gma.cli lavapipe install; then
+# Debian 12's own lavapipe (Mesa 22.3) and Debian 13's (Mesa 25.0) render markedly slower than their backports'
+# (docs/design.md); offline, the system's is used. As root, the few libraries the backport links against that
+# the system's Mesa did not pull in are installed too (Debian 13: libdisplay-info2).
+lavapipe_args=()
+[ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && lavapipe_args+=(--with-dependencies)
+if ! "$PY" -m gma.cli lavapipe install "${lavapipe_args[@]}"; then
     echo "[install] keeping the system's lavapipe" >&2
 fi

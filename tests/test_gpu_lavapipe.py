@@ -106,8 +106,8 @@ def test_deb_unpacking_takes_only_lavapipe():
         lavapipe.lavapipe_files(_ar({"data.tar.xz": _tar_xz({"./usr/share/doc/x": b"x"})}))
 
 
-@pytest.mark.skipif(not shutil.which("gpgv") or not lavapipe.KEYRING.is_file(),
-                    reason="needs gpgv and Debian's keyring")
+@pytest.mark.skipif(not (shutil.which("gpgv") or shutil.which("sqv")) or not lavapipe.KEYRING.is_file(),
+                    reason="needs gpgv or sqv, and Debian's keyring")
 def test_an_unsigned_release_is_refused():
     forged = b"-----BEGIN PGP SIGNED MESSAGE-----\nHash: SHA256\n\nSHA256:\n 00 1 x\n" \
              b"-----BEGIN PGP SIGNATURE-----\n\niQIzBAEBCAAdFiEE\n-----END PGP SIGNATURE-----\n"
@@ -115,20 +115,27 @@ def test_an_unsigned_release_is_refused():
         lavapipe.verified_release(forged)
 
 
-@pytest.fixture
-def served(monkeypatch, tmp_path):
-    """install() against an in-memory mirror; returns the files it serves (tests may corrupt them)."""
+def _serve(monkeypatch, tmp_path, codename="bookworm", depends=""):
+    """install() against an in-memory mirror of ``codename``'s backports; returns the files it serves
+    (tests may corrupt them)."""
     deb = _deb()
-    xz = lzma.compress(_packages(deb).encode())
-    dists = "dists/bookworm-backports"
+    packages = _packages(deb) + (f"Depends: {depends}\n" if depends else "")
+    xz = lzma.compress(packages.encode())
+    dists = f"dists/{codename}-backports"
     files = {f"{dists}/InRelease": b"signed", f"{dists}/main/binary-amd64/Packages.xz": xz,
              "pool/main/m/mesa/new.deb": deb}
     monkeypatch.setattr(lavapipe, "_fetch", lambda url, timeout=60.0: files[url.removeprefix(lavapipe.MIRROR + "/")])
-    monkeypatch.setattr(lavapipe, "verified_release", lambda signed: _release(xz))
+    monkeypatch.setattr(lavapipe, "verified_release", lambda signed, **kw: _release(xz))
     monkeypatch.setattr(lavapipe, "_dpkg", lambda *a: "amd64")
+    monkeypatch.setattr(lavapipe, "_os_release", lambda: {"VERSION_CODENAME": codename})
     monkeypatch.setattr(lavapipe, "_works", lambda manifest, version: f"Mesa {version} (LLVM 15.0.6)")
     monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(tmp_path / "cache"))
     return files
+
+
+@pytest.fixture
+def served(monkeypatch, tmp_path):
+    return _serve(monkeypatch, tmp_path)
 
 
 def test_install_unpacks_a_complete_driver_with_an_absolute_library_path(served, tmp_path):
@@ -163,16 +170,68 @@ def test_install_keeps_the_system_driver_where_it_is_not_needed(monkeypatch, cap
     monkeypatch.setenv("GMA_LAVAPIPE", "system")
     assert lavapipe.install() is None
     assert "system lavapipe kept: GMA_LAVAPIPE=system" in capsys.readouterr().out
+    monkeypatch.delenv("GMA_LAVAPIPE")
+    monkeypatch.setattr(lavapipe.shutil, "which", lambda name: "/usr/bin/" + name)
+    for codename, system_mesa, kept in (("bookworm", "22.3.6-1+deb12u1", False), ("bookworm", "24.2.8-1", True),
+                                        ("trixie", "25.0.7-2", False), ("trixie", "26.1.6-1", True),
+                                        ("noble", "25.0.7-0ubuntu1", True), ("", "22.3.6", True)):
+        monkeypatch.setattr(lavapipe, "_os_release", lambda c=codename: {"VERSION_CODENAME": c})
+        monkeypatch.setattr(lavapipe, "_dpkg", lambda *a, v=system_mesa: f"Package: x\nVersion: {v}\n")
+        assert (lavapipe._why_not_needed() is not None) == kept, (codename, system_mesa)
 
 
-def _cache_with(tmp_path, *versions, complete=True):
+def test_debian_13_fetches_trixie_backports(monkeypatch, tmp_path):
+    _serve(monkeypatch, tmp_path, codename="trixie")
+    assert lavapipe.backports_suite() == "trixie-backports"
+    manifest = lavapipe.install(force=True)
+    assert manifest.parent.name == "25.0.7-2_bpo12_1"   # (the fake index's version)
+    assert lavapipe.built_for(manifest.parent) == "trixie-backports" and lavapipe.cached_manifest() == manifest
+
+
+def test_missing_dependencies_are_named_or_installed(monkeypatch, tmp_path):
+    depends = "libvulkan1, libc6 (>= 2.39), libdisplay-info2 (>= 0.2.0), libelf1t64 | libelf1, libllvm19:any"
+    _serve(monkeypatch, tmp_path, codename="trixie", depends=depends)
+    assert lavapipe._dependency_names(depends) == [["libvulkan1"], ["libc6"], ["libdisplay-info2"],
+                                                   ["libelf1t64", "libelf1"], ["libllvm19"]]
+    installed = {"libvulkan1": "installed", "libc6": "installed", "libelf1": "installed",
+                 "libllvm19": "config-files"}
+    monkeypatch.setattr(lavapipe, "_dpkg_query", lambda names: {n: installed[n] for n in names if n in installed})
+    with pytest.raises(LavapipeInstallError, match="needs libdisplay-info2 libllvm19, not installed here"):
+        lavapipe.install(force=True)
+    assert lavapipe.cached_manifest() is None
+    asked = []
+    monkeypatch.setattr(lavapipe, "_apt_install", asked.append)
+    assert lavapipe.install(force=True, with_dependencies=True) is not None
+    assert asked == [["libdisplay-info2", "libllvm19"]]
+
+
+def _cache_with(tmp_path, *versions, complete=True, suite=None):
     for v in versions:
         d = tmp_path / v
         d.mkdir(parents=True)
         (d / "lvp_icd.json").write_text("{}")
         if complete:
             (d / "libvulkan_lvp.so").write_bytes(b"x")
+        if suite:
+            (d / "source.json").write_text(json.dumps({"version": v, "suite": suite}))
     return tmp_path
+
+
+@pytest.fixture(autouse=True)
+def _debian_12(monkeypatch):
+    """These tests describe a Debian 12 machine unless they say otherwise."""
+    monkeypatch.setattr(lavapipe, "_os_release", lambda: {"VERSION_CODENAME": "bookworm"})
+
+
+def test_each_release_registers_only_drivers_fetched_for_it(monkeypatch, tmp_path):
+    """A home folder shared by a Debian 12 and a Debian 13 machine caches both releases' drivers; Debian
+    13's would not load on Debian 12 (older C library), so each machine takes its own."""
+    _cache_with(tmp_path, "25.0.7-2_bpo12_1")   # cached before source.json named the suite: Debian 12's
+    _cache_with(tmp_path, "26.1.6-1_bpo13_1", suite="trixie-backports")
+    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(tmp_path))
+    assert lavapipe.cached_manifest().parent.name == "25.0.7-2_bpo12_1"
+    monkeypatch.setattr(lavapipe, "_os_release", lambda: {"VERSION_CODENAME": "trixie"})
+    assert lavapipe.cached_manifest().parent.name == "26.1.6-1_bpo13_1"
 
 
 def test_register_adds_the_newest_cached_driver_unless_the_user_chose(monkeypatch, tmp_path):

@@ -1,9 +1,12 @@
-"""A newer lavapipe for Debian 12, kept in GMA's cache instead of replacing the system's Mesa.
+"""A newer lavapipe for Debian 12 and 13, kept in GMA's cache instead of replacing the system's Mesa.
 
 Debian 12 ships Mesa 22.3; its backports carry Mesa 25, whose lavapipe runs the renderer's passes
-markedly faster on the same CPU (docs/design.md, "The lavapipe GMA runs on"). Getting it system-wide means
-adding an apt source and upgrading every Mesa Vulkan driver on the machine, so instead
-``gma lavapipe install`` (``scripts/install.sh`` runs it) fetches the backports package,
+markedly faster on the same CPU. Debian 13 ships Mesa 25.0; its backports carry Mesa 26, whose lavapipe
+compiles a load or store with a lane-varying address as one vector gather or scatter instead of a loop
+over the lanes, and runs the passes in about three quarters of the time (docs/design.md, "The lavapipe
+GMA runs on"). Getting either system-wide means adding an apt source and upgrading every Mesa Vulkan
+driver on the machine, so instead ``gma lavapipe install`` (``scripts/install.sh`` runs it) fetches the
+backports package,
 checks it against Debian's signed archive index (gpgv and the Debian archive keyring, as apt would),
 and unpacks only the lavapipe library and its driver manifest into ``~/.cache/gma/lavapipe/<version>/``.
 The system's own lavapipe stays installed; it supplies the libraries the newer one links against and is
@@ -38,11 +41,12 @@ from gma.core.errors import DeviceError
 __all__ = ["cache_root", "cached_manifest", "install", "mesa_version", "package_version", "register"]
 
 MIRROR = "http://deb.debian.org/debian"
-SUITE = "bookworm-backports"
+# Debian release -> (the backports suite fetched from, the system Mesa from which on the system's is kept).
+# Debian 12: Mesa 22.3 against bookworm-backports' 25.0; Debian 13: Mesa 25.0 against trixie-backports' 26.1
+# (vector gathers and scatters, see the module docstring). Other systems keep their own Mesa.
+BACKPORTS = {"bookworm": ("bookworm-backports", (24,)), "trixie": ("trixie-backports", (26,))}
 PACKAGE = "mesa-vulkan-drivers"
 KEYRING = Path("/usr/share/keyrings/debian-archive-keyring.gpg")
-# System lavapipes from this Mesa major on are left as they are (Debian 13, Ubuntu 24.04 and later).
-NEW_ENOUGH_MAJOR = 24
 LIBRARY = "libvulkan_lvp.so"
 MANIFEST = "lvp_icd.json"
 
@@ -75,10 +79,23 @@ def _system_chosen(environ=os.environ) -> bool:
     return environ.get("GMA_LAVAPIPE", "").lower() == "system"
 
 
+def built_for(folder: Path) -> str:
+    """The backports suite a cached driver came from (its ``source.json``; drivers cached before GMA fetched
+    for Debian 13 came from bookworm-backports)."""
+    try:
+        return str(json.loads((folder / "source.json").read_text()).get("suite", BACKPORTS["bookworm"][0]))
+    except (OSError, ValueError, AttributeError):
+        return BACKPORTS["bookworm"][0]
+
+
 def cached_manifest(root: Path | None = None) -> Path | None:
-    """The driver manifest of the newest complete lavapipe in the cache, or None."""
+    """The driver manifest of the newest complete lavapipe in the cache that was fetched for this Debian
+    release, or None. (A home folder shared by machines of both releases holds both; Debian 13's backport
+    does not load on Debian 12, whose C library is older.)"""
     root = root or cache_root()
-    found = [p for p in root.glob(f"*/{MANIFEST}") if (p.parent / LIBRARY).is_file()] if root.is_dir() else []
+    suite = backports_suite()
+    found = [p for p in root.glob(f"*/{MANIFEST}")
+             if (p.parent / LIBRARY).is_file() and built_for(p.parent) == suite] if root.is_dir() else []
     return max(found, key=lambda p: package_version(p.parent.name), default=None)
 
 
@@ -115,22 +132,75 @@ def _dpkg(*args: str) -> str:
     return subprocess.run(["dpkg", *args], capture_output=True, text=True, check=False).stdout.strip()
 
 
+def _codename() -> str:
+    return _os_release().get("VERSION_CODENAME", "").strip('"')
+
+
+def backports_suite() -> str:
+    """The backports suite for this Debian release (Debian 12's for other systems, as with ``--force``)."""
+    return BACKPORTS.get(_codename(), BACKPORTS["bookworm"])[0]
+
+
 def _why_not_needed() -> str | None:
-    """None when this machine is one the newer lavapipe is for (Debian 12 with Mesa older than 24)."""
+    """None when this machine is one the newer lavapipe is for (Debian 12 or 13 with an older system Mesa
+    than their backports carry)."""
     if _system_chosen():
         return "GMA_LAVAPIPE=system"
-    codename = _os_release().get("VERSION_CODENAME", "").strip('"')
-    if codename != "bookworm":
-        return f"not Debian 12 ({codename or 'unknown system'}): its own Mesa is used"
+    codename = _codename()
+    if codename not in BACKPORTS:
+        return f"not Debian 12 or 13 ({codename or 'unknown system'}): its own Mesa is used"
     if not shutil.which("dpkg"):
         return "no dpkg"
     system = _dpkg("-s", PACKAGE)
     version = re.search(r"^Version:\s*(\S+)", system, re.M)
     if version is None:
         return f"{PACKAGE} is not installed (install it first: the newer lavapipe uses its libraries)"
-    if package_version(version.group(1))[:1] >= (NEW_ENOUGH_MAJOR,):
+    if package_version(version.group(1))[:1] >= BACKPORTS[codename][1]:
         return f"the system's Mesa {version.group(1)} is new enough"
     return None
+
+
+def _dependency_names(depends: str) -> list[list[str]]:
+    """A Depends field as groups of alternatives: ``a (>= 1), b:any | c`` -> [[a], [b, c]]."""
+    groups = []
+    for group in depends.split(","):
+        names = [re.split(r"[\s(:]", alt.strip(), maxsplit=1)[0] for alt in group.split("|")]
+        if names := [n for n in names if n]:
+            groups.append(names)
+    return groups
+
+
+def missing_packages(depends: str) -> list[str]:
+    """Packages of a Depends field of which no alternative is installed (presence only: the versions the
+    backport was built against are newer than the release's, and the lavapipe library runs with the
+    release's). Debian 13's backport links against libdisplay-info2, which Debian 13's own Mesa does not
+    pull in."""
+    groups = _dependency_names(depends)
+    names = sorted({n for g in groups for n in g})
+    if not names:
+        return []
+    listed = _dpkg_query(names)
+    return [g[0] for g in groups if not any(listed.get(n) == "installed" for n in g)]
+
+
+def _dpkg_query(names: list[str]) -> dict[str, str]:
+    """{package: status} for the packages dpkg knows (installed, config-files, ...)."""
+    r = subprocess.run(["dpkg-query", "-W", "-f=${Package} ${db:Status-Status}\n", *names],
+                       capture_output=True, text=True, check=False)
+    return dict(line.split(" ", 1) for line in r.stdout.splitlines() if " " in line)
+
+
+def _apt_install(packages: list[str]) -> None:
+    if os.geteuid() != 0 or not shutil.which("apt-get"):
+        raise LavapipeInstallError(f"the newer lavapipe needs {' '.join(packages)}: install them as root "
+                                   f"(apt-get install {' '.join(packages)}); the system's lavapipe stays in use")
+    print(f"[lavapipe] apt-get install {' '.join(packages)} (libraries the newer lavapipe links against)")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    r = subprocess.run(["apt-get", "install", "-y", "-qq", *packages], env=env, capture_output=True, text=True,
+                       check=False)
+    if r.returncode != 0:
+        raise LavapipeInstallError(f"apt-get install {' '.join(packages)} failed: "
+                                   f"{(r.stderr.strip().splitlines() or ['?'])[-1]}")
 
 
 def _fetch(url: str, timeout: float = 60.0) -> bytes:
@@ -141,22 +211,32 @@ def _fetch(url: str, timeout: float = 60.0) -> bytes:
         raise LavapipeInstallError(f"cannot download {url}: {e}") from None
 
 
-def verified_release(signed: bytes, keyring: Path = KEYRING) -> str:
-    """The text of a clearsigned ``InRelease`` file after gpgv has checked its signature against the
+def _verifier(keyring: Path, signed: Path, out: Path) -> list[str] | None:
+    """The command that checks a clearsigned file against ``keyring`` as apt would: gpgv (Debian 12's apt),
+    or sqv (Debian 13's apt uses Sequoia's sqv, and gpgv may be absent); None when neither is installed."""
+    if shutil.which("gpgv"):
+        return ["gpgv", "--keyring", str(keyring), "--output", str(out), str(signed)]
+    if shutil.which("sqv"):
+        return ["sqv", f"--keyring={keyring}", f"--output={out}", "--cleartext", str(signed)]
+    return None
+
+
+def verified_release(signed: bytes, keyring: Path = KEYRING, suite: str = "backports") -> str:
+    """The text of a clearsigned ``InRelease`` file after gpgv or sqv has checked its signature against the
     Debian archive keyring (what apt does); raises when it cannot be checked."""
-    if not shutil.which("gpgv") or not keyring.is_file():
-        raise LavapipeInstallError(f"gpgv or {keyring} missing: cannot check Debian's signature")
     with tempfile.TemporaryDirectory() as tmp:
         src, out = Path(tmp) / "InRelease", Path(tmp) / "Release"
+        command = _verifier(keyring, src, out)
+        if command is None or not keyring.is_file():
+            raise LavapipeInstallError(f"gpgv or sqv, or {keyring}, missing: cannot check Debian's signature")
         src.write_bytes(signed)
-        r = subprocess.run(["gpgv", "--keyring", str(keyring), "--output", str(out), str(src)],
-                           capture_output=True, text=True, check=False)
+        r = subprocess.run(command, capture_output=True, text=True, check=False)
         if r.returncode != 0 or not out.is_file():
-            raise LavapipeInstallError(f"bad signature on {SUITE}'s InRelease: {r.stderr.strip().splitlines()[-1:]}")
+            raise LavapipeInstallError(f"bad signature on {suite}'s InRelease: {r.stderr.strip().splitlines()[-1:]}")
         return out.read_text()
 
 
-def check_fresh(release: str, now: datetime | None = None) -> None:
+def check_fresh(release: str, now: datetime | None = None, suite: str = "backports") -> None:
     """Refuse a Release file past its ``Valid-Until`` (an old, once-signed index replayed by a mirror or
     a proxy would otherwise pass the signature check; apt refuses it too)."""
     field = re.search(r"^Valid-Until:\s*(.+)$", release, re.M)
@@ -164,10 +244,10 @@ def check_fresh(release: str, now: datetime | None = None) -> None:
         return
     until = parsedate_to_datetime(field.group(1).strip())
     if (now or datetime.now(timezone.utc)) > until:
-        raise LavapipeInstallError(f"{SUITE}'s Release file expired on {field.group(1).strip()} (a stale mirror?)")
+        raise LavapipeInstallError(f"{suite}'s Release file expired on {field.group(1).strip()} (a stale mirror?)")
 
 
-def release_sha256(release: str, path: str) -> tuple[str, int]:
+def release_sha256(release: str, path: str, suite: str = "backports") -> tuple[str, int]:
     """(sha256, size) that a Release file's SHA256 section lists for ``path``."""
     section = release.split("\nSHA256:", 1)[-1] if "\nSHA256:" in release else ""
     for line in section.splitlines()[1:]:
@@ -176,10 +256,10 @@ def release_sha256(release: str, path: str) -> tuple[str, int]:
         digest, size, name = line.split()
         if name == path:
             return digest, int(size)
-    raise LavapipeInstallError(f"{path} is not listed in {SUITE}'s Release file")
+    raise LavapipeInstallError(f"{path} is not listed in {suite}'s Release file")
 
 
-def package_stanza(packages: str, name: str = PACKAGE) -> dict[str, str]:
+def package_stanza(packages: str, name: str = PACKAGE, suite: str = "backports") -> dict[str, str]:
     """The newest stanza for ``name`` in a Packages index (fields as a dict)."""
     best: dict[str, str] | None = None
     for block in packages.split("\n\n"):
@@ -188,7 +268,7 @@ def package_stanza(packages: str, name: str = PACKAGE) -> dict[str, str]:
                                               > package_version(best.get("Version", ""))):
             best = fields
     if best is None or not {"Filename", "SHA256", "Version"} <= best.keys():
-        raise LavapipeInstallError(f"{name} is not in {SUITE}")
+        raise LavapipeInstallError(f"{name} is not in {suite}")
     return best
 
 
@@ -241,9 +321,12 @@ def _works(manifest: Path, version: str) -> str | None:
     return described[0] if described and mesa_version(described[0])[:2] == package_version(version)[:2] else None
 
 
-def install(root: Path | None = None, force: bool = False, update: bool = False) -> Path | None:
+def install(root: Path | None = None, force: bool = False, update: bool = False,
+            with_dependencies: bool = False) -> Path | None:
     """Fetch, check and unpack the newer lavapipe; return its manifest (None when not needed here).
-    With one already cached nothing is fetched unless ``update`` (then a newer backport is added)."""
+    With one already cached nothing is fetched unless ``update`` (then a newer backport is added). Packages
+    the backport depends on that are not installed are refused with a line naming them, or installed with
+    apt-get when ``with_dependencies`` (as root)."""
     root = root or cache_root()
     if not force and (reason := _why_not_needed()):
         print(f"[lavapipe] system lavapipe kept: {reason}")
@@ -251,18 +334,25 @@ def install(root: Path | None = None, force: bool = False, update: bool = False)
     if not update and (cached := cached_manifest(root)) is not None:
         return cached  # every `make test` runs this: no network once one is cached
     arch = _dpkg("--print-architecture") or "amd64"
-    release = verified_release(_fetch(f"{MIRROR}/dists/{SUITE}/InRelease"))
-    check_fresh(release)
+    suite = backports_suite()
+    release = verified_release(_fetch(f"{MIRROR}/dists/{suite}/InRelease"), suite=suite)
+    check_fresh(release, suite=suite)
     index = f"main/binary-{arch}/Packages.xz"
-    digest, _ = release_sha256(release, index)
-    packages = lzma.decompress(_checked(_fetch(f"{MIRROR}/dists/{SUITE}/{index}"), digest, index)).decode()
-    stanza = package_stanza(packages)
+    digest, _ = release_sha256(release, index, suite)
+    packages = lzma.decompress(_checked(_fetch(f"{MIRROR}/dists/{suite}/{index}"), digest, index)).decode()
+    stanza = package_stanza(packages, suite=suite)
     version = stanza["Version"]
     target = root / version.replace("~", "_").replace("+", "_")
     if (target / MANIFEST).is_file() and (target / LIBRARY).is_file():
         print(f"[lavapipe] Mesa {version} already in {target}")
         return target / MANIFEST
-    print(f"[lavapipe] fetching Mesa {version}'s lavapipe from {SUITE} ({int(stanza.get('Size', 0)) >> 20} MB)")
+    if missing := missing_packages(stanza.get("Depends", "")):
+        if not with_dependencies:
+            raise LavapipeInstallError(f"Mesa {version}'s lavapipe needs {' '.join(missing)}, not installed here "
+                                       f"(apt-get install {' '.join(missing)}, or `gma lavapipe install "
+                                       "--with-dependencies` as root); the system's lavapipe stays in use")
+        _apt_install(missing)
+    print(f"[lavapipe] fetching Mesa {version}'s lavapipe from {suite} ({int(stanza.get('Size', 0)) >> 20} MB)")
     deb = _checked(_fetch(f"{MIRROR}/{stanza['Filename']}", timeout=300), stanza["SHA256"], stanza["Filename"])
     library, manifest_text = lavapipe_files(deb)
     root.mkdir(parents=True, exist_ok=True)
@@ -273,7 +363,7 @@ def install(root: Path | None = None, force: bool = False, update: bool = False)
         spec["ICD"]["library_path"] = str(target / LIBRARY)  # absolute: the loader needs no search path
         (tmp / MANIFEST).write_text(json.dumps(spec, indent=2))
         (tmp / "source.json").write_text(json.dumps(
-            {"package": PACKAGE, "version": version, "url": f"{MIRROR}/{stanza['Filename']}",
+            {"package": PACKAGE, "version": version, "suite": suite, "url": f"{MIRROR}/{stanza['Filename']}",
              "sha256": stanza["SHA256"]}, indent=2))
         shutil.rmtree(target, ignore_errors=True)
         try:
