@@ -325,8 +325,8 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
             with_dependencies: bool = False) -> Path | None:
     """Fetch, check and unpack the newer lavapipe; return its manifest (None when not needed here).
     With one already cached nothing is fetched unless ``update`` (then a newer backport is added). Packages
-    the backport depends on that are not installed are refused with a line naming them, or installed with
-    apt-get when ``with_dependencies`` (as root)."""
+    the backport depends on that are not installed are installed with apt-get first when
+    ``with_dependencies`` (as root); otherwise a driver that then does not start is reported with them."""
     root = root or cache_root()
     if not force and (reason := _why_not_needed()):
         print(f"[lavapipe] system lavapipe kept: {reason}")
@@ -346,12 +346,10 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
     if (target / MANIFEST).is_file() and (target / LIBRARY).is_file():
         print(f"[lavapipe] Mesa {version} already in {target}")
         return target / MANIFEST
-    if missing := missing_packages(stanza.get("Depends", "")):
-        if not with_dependencies:
-            raise LavapipeInstallError(f"Mesa {version}'s lavapipe needs {' '.join(missing)}, not installed here "
-                                       f"(apt-get install {' '.join(missing)}, or `gma lavapipe install "
-                                       "--with-dependencies` as root); the system's lavapipe stays in use")
+    missing = missing_packages(stanza.get("Depends", ""))
+    if missing and with_dependencies:
         _apt_install(missing)
+        missing = []
     print(f"[lavapipe] fetching Mesa {version}'s lavapipe from {suite} ({int(stanza.get('Size', 0)) >> 20} MB)")
     deb = _checked(_fetch(f"{MIRROR}/{stanza['Filename']}", timeout=300), stanza["SHA256"], stanza["Filename"])
     library, manifest_text = lavapipe_files(deb)
@@ -376,6 +374,9 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
     described = _works(target / MANIFEST, version)
     if described is None:
         shutil.rmtree(target, ignore_errors=True)
-        raise LavapipeInstallError(f"Mesa {version}'s lavapipe did not start here; the system's stays in use")
+        # (Only now: the backport's Depends also lists what its other drivers need, which lavapipe may not.)
+        hint = (f" (it depends on {' '.join(missing)}, not installed here: apt-get install {' '.join(missing)}, "
+                "or `gma lavapipe install --with-dependencies` as root)") if missing else ""
+        raise LavapipeInstallError(f"Mesa {version}'s lavapipe did not start here{hint}; the system's stays in use")
     print(f"[lavapipe] installed {described} in {target}")
     return target / MANIFEST
