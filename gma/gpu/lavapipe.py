@@ -196,6 +196,8 @@ def _apt_install(packages: list[str]) -> None:
                                    f"(apt-get install {' '.join(packages)}); the system's lavapipe stays in use")
     print(f"[lavapipe] apt-get install {' '.join(packages)} (libraries the newer lavapipe links against)")
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    # (A fresh container has no package lists yet; install.sh updates them only for its own packages.)
+    subprocess.run(["apt-get", "update", "-qq"], env=env, capture_output=True, check=False)
     r = subprocess.run(["apt-get", "install", "-y", "-qq", *packages], env=env, capture_output=True, text=True,
                        check=False)
     if r.returncode != 0:
