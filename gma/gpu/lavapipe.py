@@ -129,6 +129,8 @@ def _os_release() -> dict[str, str]:
 
 
 def _dpkg(*args: str) -> str:
+    if not shutil.which("dpkg"):   # (install --force on a system without dpkg)
+        return ""
     return subprocess.run(["dpkg", *args], capture_output=True, text=True, check=False).stdout.strip()
 
 
@@ -185,6 +187,8 @@ def missing_packages(depends: str) -> list[str]:
 
 def _dpkg_query(names: list[str]) -> dict[str, str]:
     """{package: status} for the packages dpkg knows (installed, config-files, ...)."""
+    if not shutil.which("dpkg-query"):
+        return {}
     r = subprocess.run(["dpkg-query", "-W", "-f=${Package} ${db:Status-Status}\n", *names],
                        capture_output=True, text=True, check=False)
     return dict(line.split(" ", 1) for line in r.stdout.splitlines() if " " in line)
