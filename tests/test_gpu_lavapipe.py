@@ -125,7 +125,7 @@ def _serve(monkeypatch, tmp_path, codename="bookworm", depends=""):
     files = {f"{dists}/InRelease": b"signed", f"{dists}/main/binary-amd64/Packages.xz": xz,
              "pool/main/m/mesa/new.deb": deb}
     monkeypatch.setattr(lavapipe, "_fetch", lambda url, timeout=60.0: files[url.removeprefix(lavapipe.MIRROR + "/")])
-    monkeypatch.setattr(lavapipe, "verified_release", lambda signed, **kw: _release(xz))
+    monkeypatch.setattr(lavapipe, "verified_release", lambda signed: _release(xz))
     monkeypatch.setattr(lavapipe, "_dpkg", lambda *a: "amd64")
     monkeypatch.setattr(lavapipe, "_os_release", lambda: {"VERSION_CODENAME": codename})
     monkeypatch.setattr(lavapipe, "_works", lambda manifest, version: f"Mesa {version} (LLVM 15.0.6)")

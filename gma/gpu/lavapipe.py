@@ -227,7 +227,7 @@ def _verifier(keyring: Path, signed: Path, out: Path) -> list[str] | None:
     return None
 
 
-def verified_release(signed: bytes, keyring: Path = KEYRING, suite: str = "backports") -> str:
+def verified_release(signed: bytes, keyring: Path = KEYRING) -> str:
     """The text of a clearsigned ``InRelease`` file after gpgv or sqv has checked its signature against the
     Debian archive keyring (what apt does); raises when it cannot be checked."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -238,11 +238,12 @@ def verified_release(signed: bytes, keyring: Path = KEYRING, suite: str = "backp
         src.write_bytes(signed)
         r = subprocess.run(command, capture_output=True, text=True, check=False)
         if r.returncode != 0 or not out.is_file():
-            raise LavapipeInstallError(f"bad signature on {suite}'s InRelease: {r.stderr.strip().splitlines()[-1:]}")
+            why = r.stderr.strip().splitlines()[-1:]
+            raise LavapipeInstallError(f"bad signature on {backports_suite()}'s InRelease: {why}")
         return out.read_text()
 
 
-def check_fresh(release: str, now: datetime | None = None, suite: str = "backports") -> None:
+def check_fresh(release: str, now: datetime | None = None) -> None:
     """Refuse a Release file past its ``Valid-Until`` (an old, once-signed index replayed by a mirror or
     a proxy would otherwise pass the signature check; apt refuses it too)."""
     field = re.search(r"^Valid-Until:\s*(.+)$", release, re.M)
@@ -250,10 +251,11 @@ def check_fresh(release: str, now: datetime | None = None, suite: str = "backpor
         return
     until = parsedate_to_datetime(field.group(1).strip())
     if (now or datetime.now(timezone.utc)) > until:
-        raise LavapipeInstallError(f"{suite}'s Release file expired on {field.group(1).strip()} (a stale mirror?)")
+        raise LavapipeInstallError(f"{backports_suite()}'s Release file expired on {field.group(1).strip()} "
+                                   "(a stale mirror?)")
 
 
-def release_sha256(release: str, path: str, suite: str = "backports") -> tuple[str, int]:
+def release_sha256(release: str, path: str) -> tuple[str, int]:
     """(sha256, size) that a Release file's SHA256 section lists for ``path``."""
     section = release.split("\nSHA256:", 1)[-1] if "\nSHA256:" in release else ""
     for line in section.splitlines()[1:]:
@@ -262,10 +264,10 @@ def release_sha256(release: str, path: str, suite: str = "backports") -> tuple[s
         digest, size, name = line.split()
         if name == path:
             return digest, int(size)
-    raise LavapipeInstallError(f"{path} is not listed in {suite}'s Release file")
+    raise LavapipeInstallError(f"{path} is not listed in {backports_suite()}'s Release file")
 
 
-def package_stanza(packages: str, name: str = PACKAGE, suite: str = "backports") -> dict[str, str]:
+def package_stanza(packages: str, name: str = PACKAGE) -> dict[str, str]:
     """The newest stanza for ``name`` in a Packages index (fields as a dict)."""
     best: dict[str, str] | None = None
     for block in packages.split("\n\n"):
@@ -274,7 +276,7 @@ def package_stanza(packages: str, name: str = PACKAGE, suite: str = "backports")
                                               > package_version(best.get("Version", ""))):
             best = fields
     if best is None or not {"Filename", "SHA256", "Version"} <= best.keys():
-        raise LavapipeInstallError(f"{name} is not in {suite}")
+        raise LavapipeInstallError(f"{name} is not in {backports_suite()}")
     return best
 
 
@@ -341,12 +343,12 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
         return cached  # every `make test` runs this: no network once one is cached
     arch = _dpkg("--print-architecture") or "amd64"
     suite = backports_suite()
-    release = verified_release(_fetch(f"{MIRROR}/dists/{suite}/InRelease"), suite=suite)
-    check_fresh(release, suite=suite)
+    release = verified_release(_fetch(f"{MIRROR}/dists/{suite}/InRelease"))
+    check_fresh(release)
     index = f"main/binary-{arch}/Packages.xz"
-    digest, _ = release_sha256(release, index, suite)
+    digest, _ = release_sha256(release, index)
     packages = lzma.decompress(_checked(_fetch(f"{MIRROR}/dists/{suite}/{index}"), digest, index)).decode()
-    stanza = package_stanza(packages, suite=suite)
+    stanza = package_stanza(packages)
     version = stanza["Version"]
     target = root / version.replace("~", "_").replace("+", "_")
     if (target / MANIFEST).is_file() and (target / LIBRARY).is_file():
