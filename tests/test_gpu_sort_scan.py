@@ -6,33 +6,67 @@ import numpy as np
 import pytest
 
 from gma.render.gpu_scan import ExclusiveScan
-from gma.render.gpu_sort import RadixSorter
+from gma.render.gpu_sort import LANE_GROUP_BLOCKS, SORT_BLOCK, RadixSorter, lane_sort_supported
 
 pytestmark = pytest.mark.gpu
 
+# The 4-bit variant with the CPU drivers' and the GPUs' block geometry, and the lane-ordered variant
+# (lavapipe only, where it is the default; gpu_sort.py).
+VARIANTS = ["radix16", "radix128", "lanes"]
 
-@pytest.mark.parametrize("n", [1, 7, 2047, 2048, 2049, 50_000])
-@pytest.mark.parametrize("bits,high", [(32, 2**32), (10, 1000), (4, 3)])
-@pytest.mark.parametrize("threads", [16, 128])  # the CPU drivers' and the GPUs' block geometry (gpu_sort.py)
-def test_radix_sort_equals_stable_argsort(gpu, n, bits, high, threads):
+
+def sorter(gpu, variant: str) -> RadixSorter:
+    if variant == "lanes":
+        if not lane_sort_supported(gpu):
+            pytest.skip("the lane-ordered sort runs on lavapipe with 8-lane subgroups only")
+        return RadixSorter(gpu, lanes=True)
+    return RadixSorter(gpu, threads=int(variant[5:]), lanes=False)
+
+
+LANE_BLOCK = SORT_BLOCK * LANE_GROUP_BLOCKS
+
+
+@pytest.mark.parametrize("n", [1, 7, 9, 2047, 2049, LANE_BLOCK - 1, LANE_BLOCK + 3, 50_000])
+# 32 bits: three lane passes of 11 bits; 22: two of 11; 12: two of 6; 10: one; 4 and 1: one, mostly ties
+@pytest.mark.parametrize("bits,high", [(32, 2**32), (22, 2**22), (12, 4000), (10, 1000), (4, 3), (1, 2)])
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_radix_sort_equals_stable_argsort(gpu, n, bits, high, variant):
     rng = np.random.default_rng(n + bits)
     keys = rng.integers(0, high, n, dtype=np.uint64).astype(np.uint32)  # many duplicates when high small
-    sorted_keys, order = RadixSorter(gpu, threads=threads).sort(keys, bits=bits)
+    sorted_keys, order = sorter(gpu, variant).sort(keys, bits=bits)
     want = np.argsort(keys, kind="stable")
     np.testing.assert_array_equal(order, want)
     np.testing.assert_array_equal(sorted_keys, keys[want])
 
 
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_radix_sort_orders_only_the_low_bits(gpu, variant):
+    # As the tile sort of a replayed render: record numbers ride above the 10 sorted bits, unsorted.
+    rng = np.random.default_rng(3)
+    keys = (rng.integers(0, 1024, 30_000) | (rng.integers(0, 50, 30_000) << 16)).astype(np.uint32)
+    sorted_keys, order = sorter(gpu, variant).sort(keys, bits=10)
+    np.testing.assert_array_equal(order, np.argsort(keys & 1023, kind="stable"))
+    np.testing.assert_array_equal(sorted_keys, keys[order])
+
+
 @pytest.mark.parametrize("n", [5, 50_000])
-def test_radix_sort_from_a_base_orders_the_keys_above_it(gpu, n):
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_radix_sort_from_a_base_orders_the_keys_above_it(gpu, n, variant):
     # Keys within 2^18 above a base, across a power of two (as the depth keys of a frame): 18 bits of
     # key - base order them as all 32 bits would.
     rng = np.random.default_rng(n)
     base = (1 << 22) - 5000
     keys = (base + rng.integers(0, 1 << 18, n)).astype(np.uint32)
     keys[:2] = [base, base + (1 << 18) - 1]
-    sorted_keys, order = RadixSorter(gpu).sort(keys, bits=18, base=base)
+    sorted_keys, order = sorter(gpu, variant).sort(keys, bits=18, base=base)
     np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+
+
+def test_lane_sort_is_the_default_where_supported(gpu):
+    assert RadixSorter(gpu).lanes == lane_sort_supported(gpu)
+    if not lane_sort_supported(gpu):
+        with pytest.raises(ValueError, match="lane-ordered"):
+            RadixSorter(gpu, lanes=True)
 
 
 def test_radix_sort_block_geometry(gpu):

@@ -1,4 +1,6 @@
-"""Stable GPU radix sort of u32 keys with u32 values (RADIX_BITS-bit digits, count/scan/scatter per digit)."""
+"""Stable GPU radix sort of u32 keys with u32 values: count, scan and scatter per digit, with 4-bit digits
+(sort/radix_*.wgsl, any adapter) or, on lavapipe, with digits of up to 11 bits ranked by one subgroup per
+block (sort/lane_*.wgsl), so that the renderer's sorts take one or two passes instead of three to six."""
 
 from __future__ import annotations
 
@@ -14,6 +16,18 @@ RADIX_BITS = 4  # digit width; mirrors shaders/wgsl/sort/radix_digits.wgsl (whos
 # GPUs, few threads with many keys each on CPU drivers. At least 1 << RADIX_BITS; at most 255 keys a thread.
 GPU_SORT_THREADS = 128
 CPU_SORT_THREADS = 16
+# The lane-ordered variant (sort/lane_digits.wgsl): 8-lane subgroups, digits of at most 11 bits (2^11 + 1
+# counters fill half of the 16 KiB of workgroup memory WebGPU guarantees; 12 would not fit), 4 sort blocks
+# per workgroup (smaller histograms; still a dozen or more workgroups for 100k keys).
+LANE_SORT_LANES = 8
+LANE_MAX_DIGIT_BITS = 11
+LANE_GROUP_BLOCKS = 4
+
+
+def lane_sort_supported(ctx: GpuContext) -> bool:
+    """Whether the lane-ordered variant runs correctly here: it needs a CPU driver that runs a subgroup of
+    8 lanes as one SIMD thread in program order (lavapipe; sort/lane_digits.wgsl)."""
+    return ctx.is_lavapipe and ctx.has_subgroups and ctx.subgroup_size == LANE_SORT_LANES
 
 
 def sort_blocks(count: int) -> int:
@@ -33,9 +47,16 @@ class RadixSorter:
     are then indirect. ``capacity`` bounds the count and sizes the scratch buffers.
     """
 
-    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None, threads: int | None = None):
+    def __init__(self, ctx: GpuContext, workspace: Workspace | None = None, threads: int | None = None,
+                 lanes: bool | None = None):
+        """``threads``: of the 4-bit variant's blocks (default by adapter). ``lanes``: use the lane-ordered
+        variant (default: where :func:`lane_sort_supported`)."""
         self.ctx = ctx
         self.workspace = workspace or Workspace(ctx)
+        supported = lane_sort_supported(ctx)
+        if lanes and not supported:
+            raise ValueError("the lane-ordered sort needs lavapipe with 8-lane subgroups")
+        self.lanes = supported if lanes is None else lanes
         self.threads = threads or (CPU_SORT_THREADS if ctx.is_software else GPU_SORT_THREADS)
         keys_each = SORT_BLOCK // max(self.threads, 1)
         # An even number of keys each: the passes take a thread's keys two per step (radix_digits.wgsl).
@@ -50,18 +71,16 @@ class RadixSorter:
         ``base`` (a buffer and the index of a u32 in it) the sort orders ``key - base`` by its low ``bits``
         (wrapping), for keys that lie within ``2**bits`` above the base."""
         ctx = self.ctx
-        passes = max(1, (bits + RADIX_BITS - 1) // RADIX_BITS)
-        pass_defines = {"SORT_WG": self.threads, **({"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {})}
         extra = [base[0]] if base else []
-        hist = self.workspace.get("sort.hist", (4 << RADIX_BITS) * sort_blocks(capacity))
+        digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base)
+        blocks = sort_blocks(capacity)
+        if self.lanes:
+            blocks = (blocks + LANE_GROUP_BLOCKS - 1) // LANE_GROUP_BLOCKS
+        hist = self.workspace.get("sort.hist", (4 << digit_bits) * blocks)
         keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
         vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
         src, dst = (keys, values), (keys_tmp, vals_tmp)
-        count_p = [ctx.compute_pipeline("sort/radix_count.wgsl", {"SHIFT": RADIX_BITS * i, **pass_defines})
-                   for i in range(passes)]
-        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"SHIFT": 0, "SORT_WG": self.threads})
-        scatter_p = [ctx.compute_pipeline("sort/radix_scatter.wgsl", {"SHIFT": RADIX_BITS * i, **pass_defines})
-                     for i in range(passes)]
+        passes = len(count_p)
         scan_bg = ctx.bind_group(scan_p, [info, hist])
         for i in range(passes):
             cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)
@@ -80,6 +99,27 @@ class RadixSorter:
             # The result sits in the scratch pair: copy it back (cheaper than one more radix pass).
             encoder.copy_buffer_to_buffer(keys_tmp, 0, keys, 0, 4 * capacity)
             encoder.copy_buffer_to_buffer(vals_tmp, 0, values, 0, 4 * capacity)
+
+    def _pipelines(self, bits: int, base):
+        """Digit width and the pipelines of a ``bits``-bit sort: count and scatter per pass, and the scan."""
+        ctx = self.ctx
+        keyed = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
+        if self.lanes:
+            passes = max(1, -(-bits // LANE_MAX_DIGIT_BITS))
+            digit_bits = -(-bits // passes)   # the passes share the bits evenly: smaller histograms
+            folder, defines = "sort/lane", {"DIGIT_BITS": digit_bits, "GROUP_BLOCKS": LANE_GROUP_BLOCKS, **keyed}
+            group_blocks = LANE_GROUP_BLOCKS
+        else:
+            passes = max(1, -(-bits // RADIX_BITS))
+            digit_bits = RADIX_BITS
+            folder, defines = "sort/radix", {"SORT_WG": self.threads, **keyed}
+            group_blocks = 1
+        count_p = [ctx.compute_pipeline(f"{folder}_count.wgsl", {"SHIFT": digit_bits * i, **defines})
+                   for i in range(passes)]
+        scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines})
+                     for i in range(passes)]
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits, "GROUP_BLOCKS": group_blocks})
+        return digit_bits, count_p, scan_p, scatter_p
 
     def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None):
         """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
