@@ -39,6 +39,16 @@ def test_radix_sort_equals_stable_argsort(gpu, n, bits, high, variant):
     np.testing.assert_array_equal(sorted_keys, keys[want])
 
 
+@pytest.mark.parametrize("bits", [32, 22, 10, 4])   # 3, 2, 1, 1 lane passes; 8, 6, 3, 1 radix passes
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_radix_sort_from_a_separate_source(gpu, bits, variant):
+    # encode(source=...): the result lands in the output pair after any number of passes, no copy back.
+    keys = np.random.default_rng(bits).integers(0, 2**bits, 20_000, dtype=np.uint64).astype(np.uint32)
+    sorted_keys, order = sorter(gpu, variant).sort(keys, bits=bits, separate=True)
+    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
+    np.testing.assert_array_equal(sorted_keys, keys[order])
+
+
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_radix_sort_orders_only_the_low_bits(gpu, variant):
     # As the tile sort of a replayed render: record numbers ride above the 10 sorted bits, unsorted.

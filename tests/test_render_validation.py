@@ -93,3 +93,23 @@ def test_zero_length_quaternion_rows_found_exactly():
         bad[7] = row
         assert _zero_length_rows(bad) == zero, row
     assert not _zero_length_rows(np.zeros((0, 4), np.float32))
+
+
+def test_values_rejected_while_projecting_leave_the_renderer_as_it_was(gpu, monkeypatch):
+    # The public call checks the surfels' values after projection is submitted (SurfelRasterizer.forward's
+    # while_projecting): nothing after projection runs on them, and no hint grows from them.
+    from gma.render.api import rasterizer_for
+
+    a = args(n=64)
+    good = rasterize(**a, ctx=gpu).color
+    rast = rasterizer_for(gpu)
+    hints = (rast.isect_capacity_hint, rast.depth_bits_hint)
+    after_projection = []
+    rest = rast._sort_bin_rasterize
+    monkeypatch.setattr(rast, "_sort_bin_rasterize", lambda *x: after_projection.append(1) or rest(*x))
+    bad = a["scales"].clone()
+    bad[5, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"scales holds 1 non-finite.*\[5, 0\]"):
+        rasterize(**dict(a, scales=bad), ctx=gpu)
+    assert not after_projection and (rast.isect_capacity_hint, rast.depth_bits_hint) == hints
+    assert torch.equal(rasterize(**a, ctx=gpu).color, good) and after_projection

@@ -66,10 +66,13 @@ class RadixSorter:
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,
-               base: tuple[wgpu.GPUBuffer, int] | None = None) -> None:
-        """Encode the sort; the result ends up in ``keys``/``values`` (scratch ping-pong inside). With
-        ``base`` (a buffer and the index of a u32 in it) the sort orders ``key - base`` by its low ``bits``
-        (wrapping), for keys that lie within ``2**bits`` above the base."""
+               base: tuple[wgpu.GPUBuffer, int] | None = None,
+               source: tuple[wgpu.GPUBuffer, wgpu.GPUBuffer] | None = None) -> None:
+        """Encode the sort; the result ends up in ``keys``/``values``. With ``base`` (a buffer and the
+        index of a u32 in it) the sort orders ``key - base`` by its low ``bits`` (wrapping), for keys that
+        lie within ``2**bits`` above the base. With ``source`` (keys, values) the pairs are read from there
+        and ``keys``/``values`` only receive them (no copy at the end for an odd number of passes, as the
+        in-place sort needs; the renderer's tile sort takes one pass on lavapipe); the source is left as is."""
         ctx = self.ctx
         extra = [base[0]] if base else []
         digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base)
@@ -77,12 +80,15 @@ class RadixSorter:
         if self.lanes:
             blocks = (blocks + LANE_GROUP_BLOCKS - 1) // LANE_GROUP_BLOCKS
         hist = self.workspace.get("sort.hist", (4 << digit_bits) * blocks)
-        keys_tmp = self.workspace.get("sort.keys_tmp", 4 * capacity)
-        vals_tmp = self.workspace.get("sort.vals_tmp", 4 * capacity)
-        src, dst = (keys, values), (keys_tmp, vals_tmp)
+        tmp = (self.workspace.get("sort.keys_tmp", 4 * capacity), self.workspace.get("sort.vals_tmp", 4 * capacity))
         passes = len(count_p)
+        out = (keys, values)
+        if source is None:   # in place: ping-pong with the scratch pair, copy back after an odd count
+            src, targets = out, [tmp if i % 2 == 0 else out for i in range(passes)]
+        else:   # the last pass writes the output, earlier ones alternate with the scratch pair before it
+            src, targets = source, [out if (passes - 1 - i) % 2 == 0 else tmp for i in range(passes)]
         scan_bg = ctx.bind_group(scan_p, [info, hist])
-        for i in range(passes):
+        for i, dst in enumerate(targets):
             cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("sort") if timer else None)
             cp.set_pipeline(count_p[i])
             cp.set_bind_group(0, ctx.bind_group(count_p[i], [info, src[0], hist] + extra))
@@ -94,11 +100,11 @@ class RadixSorter:
             cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]] + extra))
             cp.dispatch_workgroups_indirect(info, 0)
             cp.end()
-            src, dst = dst, src
-        if passes % 2:
+            src = dst
+        if src is not out:
             # The result sits in the scratch pair: copy it back (cheaper than one more radix pass).
-            encoder.copy_buffer_to_buffer(keys_tmp, 0, keys, 0, 4 * capacity)
-            encoder.copy_buffer_to_buffer(vals_tmp, 0, values, 0, 4 * capacity)
+            encoder.copy_buffer_to_buffer(tmp[0], 0, keys, 0, 4 * capacity)
+            encoder.copy_buffer_to_buffer(tmp[1], 0, values, 0, 4 * capacity)
 
     def _pipelines(self, bits: int, base):
         """Digit width and the pipelines of a ``bits``-bit sort: count and scatter per pass, and the scan."""
@@ -121,8 +127,10 @@ class RadixSorter:
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits, "GROUP_BLOCKS": group_blocks})
         return digit_bits, count_p, scan_p, scatter_p
 
-    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None):
-        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values)."""
+    def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None,
+             separate: bool = False):
+        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values). ``separate``:
+        through encode's ``source`` instead of in place."""
         ctx = self.ctx
         keys = np.ascontiguousarray(keys, np.uint32)
         n = keys.size
@@ -135,6 +143,11 @@ class RadixSorter:
                           wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
         enc = ctx.device.create_command_encoder()
         based = (ctx.upload(np.array([base], np.uint32), "sort.base"), 0) if base is not None else None
-        self.encode(enc, info, kb, vb, n, bits, base=based)
+        if separate:
+            out_k, out_v = ctx.buffer(4 * n, "sorted_keys"), ctx.buffer(4 * n, "sorted_values")
+            self.encode(enc, info, out_k, out_v, n, bits, base=based, source=(kb, vb))
+            kb, vb = out_k, out_v
+        else:
+            self.encode(enc, info, kb, vb, n, bits, base=based)
         ctx.submit(enc)
         return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)

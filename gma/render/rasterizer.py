@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -281,14 +282,18 @@ class SurfelRasterizer:
         if n > 0:
             self._setup(encoder, st, timer)
             emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups})
+            # Emission writes scratch lists that the tile sort reads, and the sort writes the kept ones
+            # (no copy back after its one pass on lavapipe: gpu_sort.py).
+            emitted = (self.workspace.get("emitted_tiles", 4 * cap), self.workspace.get("emitted_ids", 4 * cap))
             emit_resources = dict(enumerate([st.params, st.depth_order, st.isect_offsets, st.tile_counts,
-                                             st.tile_rects, isect_tiles, isect_ids]))
+                                             st.tile_rects, *emitted]))
             if records:
                 emit_resources[7] = records.record_base
             if subgroups:
                 emit_resources[8] = st.block_bands
             self._dispatch(encoder, emit, emit_resources, ((n + 255) // 256, 1, 1), "bin", timer)
-            self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer)
+            self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer,
+                               source=emitted)
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
@@ -308,7 +313,8 @@ class SurfelRasterizer:
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
-                timer: PassTimer | None = None, replay: bool = True, read_images: bool = False) -> ForwardState:
+                timer: PassTimer | None = None, replay: bool = True, read_images: bool = False,
+                while_projecting: Callable[[], None] | None = None) -> ForwardState:
         """Render (read the images with :func:`read_outputs`). With ``replay`` (the default) the state
         keeps freshly allocated buffers, everything :meth:`backward` needs. Without it the images land
         in scratch buffers that the next render overwrites (read them first), nothing for a backward
@@ -324,13 +330,17 @@ class SurfelRasterizer:
         between the submissions left the GPU idle while the second part was encoded: standard scene,
         100k surfels, lavapipe, ~4 ms of ~110.) With ``read_images`` the images come back in the same
         transfer as the counts (one device round trip fewer; read again after a rerun), and
-        :func:`read_outputs` returns them."""
+        :func:`read_outputs` returns them. ``while_projecting`` runs on the host after projection is
+        submitted and before the rest is (the public call checks the surfels' values there, off the
+        critical path: an exception from it leaves only projection's work behind)."""
         ctx, n, c = self.ctx, surfels.count, surfels.channels
         bg = np.zeros(c, np.float32) if background is None else np.asarray(background, np.float32)
         capacity, key_bits = self.isect_capacity_hint, self.depth_bits_hint
         enc = ctx.device.create_command_encoder()
         st = self.project(enc, surfels, camera, capacity, timer, keep=replay)
         ctx.submit(enc)
+        if while_projecting is not None:
+            while_projecting()
         timed_projection = list(timer.names) if timer else []
         hw = camera.width * camera.height
         def image(label, nbytes):  # kept for the backward pass, or scratch that the next render reuses

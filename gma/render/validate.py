@@ -62,9 +62,10 @@ def _zero_length_rows(q: np.ndarray) -> bool:
     return bool((np.einsum("ij,ij->i", rows, rows) == 0).any())
 
 
-def check_surfels(means, quats, scales, opacities, colors):
+def check_surfels(means, quats, scales, opacities, colors, values: bool = True):
     """Validate surfel tensors. Returns them as tensors (opacities [N], others 2-D) and their host copies
-    (float32 numpy, see :func:`host_array`) in the same order."""
+    (float32 numpy, see :func:`host_array`) in the same order. ``values=False`` checks types and shapes
+    only; the caller then runs :func:`check_surfel_values` on the host copies before it uses a result."""
     means = as_float_tensor("means", means)
     quats = as_float_tensor("quats", quats)
     scales = as_float_tensor("scales", scales)
@@ -85,9 +86,17 @@ def check_surfels(means, quats, scales, opacities, colors):
         raise ValueError(f"surfel tensors are on different devices: {sorted(map(str, devices))}")
     tensors = (means, quats, scales, opacities, colors)
     host = tuple(host_array(t) for t in tensors)
+    if values:
+        check_surfel_values(host)
+    return tensors, host
+
+
+def check_surfel_values(host) -> None:
+    """The value checks of :func:`check_surfels` on its host copies (means, quats, scales, opacities,
+    colors as float32 numpy arrays)."""
     for name, a in zip(("means", "quats", "scales", "opacities", "colors"), host):
         check_finite(name, a)
-    if n:
+    if len(host[0]):
         q, s, o = host[1], host[2], host[3]
         if _zero_length_rows(q):
             raise ValueError("quats has zero-length rows; a rotation quaternion must be non-zero")
@@ -95,7 +104,6 @@ def check_surfels(means, quats, scales, opacities, colors):
             raise ValueError("scales must be >= 0 (already activated, e.g. exp of log-scales)")
         if ((o < 0) | (o > 1)).any():
             raise ValueError("opacities must lie in [0, 1] (already activated, e.g. sigmoid of logits)")
-    return tensors, host
 
 
 def check_camera(viewmat, K, width, height):
