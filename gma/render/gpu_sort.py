@@ -57,6 +57,7 @@ class RadixSorter:
         if lanes and not supported:
             raise ValueError("the lane-ordered sort needs lavapipe with 8-lane subgroups")
         self.lanes = supported if lanes is None else lanes
+        self.max_digit_bits = LANE_MAX_DIGIT_BITS   # of the lane-ordered variant (tests lower it)
         self.threads = threads or (CPU_SORT_THREADS if ctx.is_software else GPU_SORT_THREADS)
         keys_each = SORT_BLOCK // max(self.threads, 1)
         # An even number of keys each: the passes take a thread's keys two per step (radix_digits.wgsl).
@@ -67,15 +68,20 @@ class RadixSorter:
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,
                base: tuple[wgpu.GPUBuffer, int] | None = None,
-               source: tuple[wgpu.GPUBuffer, wgpu.GPUBuffer] | None = None) -> None:
+               source: tuple[wgpu.GPUBuffer, wgpu.GPUBuffer] | None = None,
+               ranks: wgpu.GPUBuffer | None = None) -> None:
         """Encode the sort; the result ends up in ``keys``/``values``. With ``base`` (a buffer and the
         index of a u32 in it) the sort orders ``key - base`` by its low ``bits`` (wrapping), for keys that
         lie within ``2**bits`` above the base. With ``source`` (keys, values) the pairs are read from there
         and ``keys``/``values`` only receive them (no copy at the end for an odd number of passes, as the
-        in-place sort needs; the renderer's tile sort takes one pass on lavapipe); the source is left as is."""
+        in-place sort needs; the renderer's tile sort takes one pass on lavapipe); the source is left as is.
+        With ``ranks`` (only where :meth:`ranks_in_one_pass`) each pair's sorted position is written at its
+        input position."""
         ctx = self.ctx
         extra = [base[0]] if base else []
-        digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base)
+        if ranks is not None and not self.ranks_in_one_pass(bits):
+            raise ValueError(f"a {bits}-bit sort cannot write ranks here (see ranks_in_one_pass)")
+        digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base, ranks is not None)
         blocks = sort_blocks(capacity)
         if self.lanes:
             blocks = (blocks + LANE_GROUP_BLOCKS - 1) // LANE_GROUP_BLOCKS
@@ -97,7 +103,10 @@ class RadixSorter:
             cp.set_bind_group(0, scan_bg)
             cp.dispatch_workgroups(1)
             cp.set_pipeline(scatter_p[i])
-            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]] + extra))
+            scattered = dict(enumerate([info, hist, src[0], src[1], dst[0], dst[1]] + extra))
+            if ranks is not None:
+                scattered[7] = ranks
+            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], scattered))
             cp.dispatch_workgroups_indirect(info, 0)
             cp.end()
             src = dst
@@ -106,48 +115,60 @@ class RadixSorter:
             encoder.copy_buffer_to_buffer(tmp[0], 0, keys, 0, 4 * capacity)
             encoder.copy_buffer_to_buffer(tmp[1], 0, values, 0, 4 * capacity)
 
-    def _pipelines(self, bits: int, base):
+    def passes(self, bits: int) -> int:
+        """Count/scan/scatter rounds of a ``bits``-bit sort."""
+        return max(1, -(-bits // (self.max_digit_bits if self.lanes else RADIX_BITS)))
+
+    def ranks_in_one_pass(self, bits: int) -> bool:
+        """Whether a ``bits``-bit sort can write each pair's sorted position (encode's ``ranks``): the
+        lane-ordered variant in one pass, whose scatter still sees the input order."""
+        return self.lanes and self.passes(bits) == 1
+
+    def _pipelines(self, bits: int, base, ranks: bool = False):
         """Digit width and the pipelines of a ``bits``-bit sort: count and scatter per pass, and the scan."""
         ctx = self.ctx
         keyed = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
+        passes = self.passes(bits)
         if self.lanes:
-            passes = max(1, -(-bits // LANE_MAX_DIGIT_BITS))
             digit_bits = -(-bits // passes)   # the passes share the bits evenly: smaller histograms
             folder, defines = "sort/lane", {"DIGIT_BITS": digit_bits, "GROUP_BLOCKS": LANE_GROUP_BLOCKS, **keyed}
             group_blocks = LANE_GROUP_BLOCKS
         else:
-            passes = max(1, -(-bits // RADIX_BITS))
             digit_bits = RADIX_BITS
             folder, defines = "sort/radix", {"SORT_WG": self.threads, **keyed}
             group_blocks = 1
         count_p = [ctx.compute_pipeline(f"{folder}_count.wgsl", {"SHIFT": digit_bits * i, **defines})
                    for i in range(passes)]
-        scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines})
+        scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines,
+                                                                        **({"RANKS": True} if ranks else {})})
                      for i in range(passes)]
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits, "GROUP_BLOCKS": group_blocks})
         return digit_bits, count_p, scan_p, scatter_p
 
     def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None,
-             separate: bool = False):
-        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values). ``separate``:
-        through encode's ``source`` instead of in place."""
+             separate: bool = False, ranks: bool = False):
+        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values), and with
+        ``ranks`` each pair's sorted position by its input position too. ``separate``: through encode's
+        ``source`` instead of in place."""
         ctx = self.ctx
         keys = np.ascontiguousarray(keys, np.uint32)
         n = keys.size
         values = np.arange(n, dtype=np.uint32) if values is None else np.ascontiguousarray(values, np.uint32)
         if n == 0:
-            return keys.copy(), values.copy()
+            return (keys.copy(), values.copy()) + ((np.zeros(0, np.uint32),) if ranks else ())
         kb = ctx.upload(keys, "keys")
         vb = ctx.upload(values, "values")
         info = ctx.upload(dispatch_info(n, SORT_BLOCK), "sort.info",
                           wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
         enc = ctx.device.create_command_encoder()
         based = (ctx.upload(np.array([base], np.uint32), "sort.base"), 0) if base is not None else None
+        rb = ctx.buffer(4 * n, "ranks") if ranks else None
         if separate:
             out_k, out_v = ctx.buffer(4 * n, "sorted_keys"), ctx.buffer(4 * n, "sorted_values")
-            self.encode(enc, info, out_k, out_v, n, bits, base=based, source=(kb, vb))
+            self.encode(enc, info, out_k, out_v, n, bits, base=based, source=(kb, vb), ranks=rb)
             kb, vb = out_k, out_v
         else:
-            self.encode(enc, info, kb, vb, n, bits, base=based)
+            self.encode(enc, info, kb, vb, n, bits, base=based, ranks=rb)
         ctx.submit(enc)
-        return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)
+        out = (ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n))
+        return out + ((ctx.read(rb, np.uint32, n),) if ranks else ())

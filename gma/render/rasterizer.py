@@ -64,6 +64,9 @@ class RecordIndex:
 
     isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
     record_base: wgpu.GPUBuffer   # [N] by surfel id (written for listed surfels only)
+    # [isects] by emission index: each intersection's place in the tile-sorted list, where its record is.
+    # Written by a one-pass tile sort (RadixSorter.ranks_in_one_pass); else the backward's record_slots.wgsl.
+    slots: wgpu.GPUBuffer | None = None
 
 
 @dataclass
@@ -274,6 +277,8 @@ class SurfelRasterizer:
             ranges = take(8 * tx * ty, "tile_ranges", STORAGE)
             if self._records_for(camera, surfels.channels, capacity):
                 records = RecordIndex(take(4 * cap, "isect_keys", STORAGE), take(4 * max(n, 1), "record_base", STORAGE))
+                if self.sorter.ranks_in_one_pass(_bits_for(tx * ty)):
+                    records.slots = take(4 * cap, "record_slots", STORAGE)
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
         defines = self.raster_defines(surfels.channels)
@@ -293,7 +298,7 @@ class SurfelRasterizer:
                 emit_resources[8] = st.block_bands
             self._dispatch(encoder, emit, emit_resources, ((n + 255) // 256, 1, 1), "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer,
-                               source=emitted)
+                               source=emitted, ranks=records.slots if records else None)
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
@@ -381,7 +386,7 @@ class SurfelRasterizer:
             # ranges point, which this render wrote.
             kept = [*st.kept, isect_ids, ranges, *images, *replayed]
             if records:
-                kept += [records.isect_keys, records.record_base]
+                kept += [records.isect_keys, records.record_base] + ([records.slots] if records.slots is not None else [])
             ctx.recycler.release_with(state, kept)
         return state
 
@@ -468,7 +473,8 @@ class SurfelRasterizer:
         if colors_out:
             proj_resources[10] = v_colors
         if records:
-            proj_resources.update({11: records.record_base, 12: self._record_slots(enc, state, timer)})
+            slots = records.slots if records.slots is not None else self._record_slots(enc, state, timer)
+            proj_resources.update({11: records.record_base, 12: slots})
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "NORMAL_DEPTH_GRADS": normal_depth, "COLORS_OUT": colors_out, "CHANNELS": c}
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
