@@ -386,7 +386,7 @@ class SurfelRasterizer:
             # ranges point, which this render wrote.
             kept = [*st.kept, isect_ids, ranges, *images, *replayed]
             if records:
-                kept += [records.isect_keys, records.record_base] + ([records.slots] if records.slots is not None else [])
+                kept += [b for b in (records.isect_keys, records.record_base, records.slots) if b is not None]
             ctx.recycler.release_with(state, kept)
         return state
 
