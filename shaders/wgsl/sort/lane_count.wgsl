@@ -25,8 +25,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) l
         bins[d] = 0u;
     }
     let base = key_offset();
-    let start = block * LANE_BLOCK;
-    let end = min(start + LANE_BLOCK, info.count);
+    let keys_range = lane_keys(block, info.count);
+    let start = keys_range.x;
+    let end = keys_range.y;
     for (var i = start; i < end; i += LANES) {   // the same trip count in every lane
         let idx = i + lane;
         let d = select(NO_DIGIT, key_digit(keys[min(idx, end - 1u)], base), idx < end);

@@ -4,7 +4,7 @@
 // workgroup memory with plain loads and stores: lanes that share a digit learn of each other through
 // xor-shuffles, so every lane of a digit stores the same new count and the store order does not matter.
 // Defines: SHIFT, DIGIT_BITS (digit width), GROUP_BLOCKS (see LANE_BLOCK), KEY_BASE (optional: the sort
-// orders key - key_base[KEY_BASE_WORD], see radix_digits.wgsl).
+// orders key - key_base[KEY_BASE_WORD], see key_digits.wgsl).
 const LANES: u32 = 8u;
 const RADIX: u32 = 1u << DIGIT_BITS;
 const NO_DIGIT: u32 = RADIX;   // lanes past the end count into this extra bin
@@ -18,16 +18,12 @@ fn lane_groups(sort_blocks: u32) -> u32 {
     return (sort_blocks + GROUP_BLOCKS - 1u) / GROUP_BLOCKS;
 }
 
-fn key_offset() -> u32 {
-#if KEY_BASE
-    return key_base[KEY_BASE_WORD];
-#else
-    return 0u;
-#endif
-}
+#include "sort/key_digits.wgsl"
 
-fn key_digit(key: u32, base: u32) -> u32 {
-    return ((key - base) >> SHIFT) & (RADIX - 1u);
+// This workgroup's keys, [start, end), for sort block `block` of `sort_blocks` over `count` keys.
+fn lane_keys(block: u32, count: u32) -> vec2<u32> {
+    let start = block * LANE_BLOCK;
+    return vec2<u32>(start, min(start + LANE_BLOCK, count));
 }
 
 // Of the subgroup's 8 digits `d` (one per lane): how many lanes hold this lane's digit (x) and how many of

@@ -29,19 +29,7 @@ const RADIX_BITS: u32 = 4u;   // mirrored by gma/render/gpu_sort.py
 const RADIX: u32 = 1u << RADIX_BITS;
 const SORT_ITEMS: u32 = SORT_BLOCK / SORT_WG;
 
-// What the sort subtracts from every key (see KEY_BASE above).
-fn key_offset() -> u32 {
-#if KEY_BASE
-    return key_base[KEY_BASE_WORD];
-#else
-    return 0u;
-#endif
-}
-
-// The digit of `key` (key - key_offset(), passed in as `base`).
-fn key_digit(key: u32, base: u32) -> u32 {
-    return ((key - base) >> SHIFT) & (RADIX - 1u);
-}
+#include "sort/key_digits.wgsl"
 
 // Counts per digit: digit d in byte d % 4 of component d / 4.
 fn add_digit(c: ptr<function, vec4<u32>>, digit: u32) {
