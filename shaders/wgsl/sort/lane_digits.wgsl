@@ -20,7 +20,7 @@ fn lane_groups(sort_blocks: u32) -> u32 {
 
 #include "sort/key_digits.wgsl"
 
-// This workgroup's keys, [start, end), for sort block `block` of `sort_blocks` over `count` keys.
+// The keys [start, end) of workgroup `block` (LANE_BLOCK of them, fewer in the last) among `count` keys.
 fn lane_keys(block: u32, count: u32) -> vec2<u32> {
     let start = block * LANE_BLOCK;
     return vec2<u32>(start, min(start + LANE_BLOCK, count));
