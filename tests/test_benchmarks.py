@@ -23,6 +23,7 @@ SMOKE: dict[str, list[str] | str] = {
     "render_backward.py": ["--repeats", "1", "--counts", "500"],
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
     "shader_ab.py": ["{repo}/shaders/wgsl", "{repo}/shaders/wgsl", "--rounds", "2", "--count", "500"],
+    "sort.py": ["--depth-keys", "3000", "--tile-keys", "5000", "--rounds", "2", "--repeat", "1"],
     "body_posing.py": ["--per-face", "1", "--frames", "2"],
     "synth.py": ["--size", "48"],
     "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--fine-per-face", "1"],
