@@ -82,10 +82,8 @@ class RadixSorter:
         if ranks is not None and not self.ranks_in_one_pass(bits):
             raise ValueError(f"a {bits}-bit sort cannot write ranks here (see ranks_in_one_pass)")
         digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base, ranks is not None)
-        blocks = sort_blocks(capacity)
-        if self.lanes:
-            blocks = (blocks + LANE_GROUP_BLOCKS - 1) // LANE_GROUP_BLOCKS
-        hist = self.workspace.get("sort.hist", (4 << digit_bits) * blocks)
+        groups = -(-sort_blocks(capacity) // self.group_blocks)   # histogram columns: one per workgroup
+        hist = self.workspace.get("sort.hist", (4 << digit_bits) * groups)
         tmp = (self.workspace.get("sort.keys_tmp", 4 * capacity), self.workspace.get("sort.vals_tmp", 4 * capacity))
         passes = len(count_p)
         out = (keys, values)
@@ -115,6 +113,11 @@ class RadixSorter:
             encoder.copy_buffer_to_buffer(tmp[0], 0, keys, 0, 4 * capacity)
             encoder.copy_buffer_to_buffer(tmp[1], 0, values, 0, 4 * capacity)
 
+    @property
+    def group_blocks(self) -> int:
+        """Sort blocks per workgroup (each with its histogram column)."""
+        return LANE_GROUP_BLOCKS if self.lanes else 1
+
     def passes(self, bits: int) -> int:
         """Count/scan/scatter rounds of a ``bits``-bit sort."""
         return max(1, -(-bits // (self.max_digit_bits if self.lanes else RADIX_BITS)))
@@ -131,18 +134,17 @@ class RadixSorter:
         passes = self.passes(bits)
         if self.lanes:
             digit_bits = -(-bits // passes)   # the passes share the bits evenly: smaller histograms
-            folder, defines = "sort/lane", {"DIGIT_BITS": digit_bits, "GROUP_BLOCKS": LANE_GROUP_BLOCKS, **keyed}
-            group_blocks = LANE_GROUP_BLOCKS
+            folder, defines = "sort/lane", {"DIGIT_BITS": digit_bits, "GROUP_BLOCKS": self.group_blocks, **keyed}
         else:
             digit_bits = RADIX_BITS
             folder, defines = "sort/radix", {"SORT_WG": self.threads, **keyed}
-            group_blocks = 1
         count_p = [ctx.compute_pipeline(f"{folder}_count.wgsl", {"SHIFT": digit_bits * i, **defines})
                    for i in range(passes)]
         scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines,
                                                                         **({"RANKS": True} if ranks else {})})
                      for i in range(passes)]
-        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits, "GROUP_BLOCKS": group_blocks})
+        scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits,
+                                                                "GROUP_BLOCKS": self.group_blocks})
         return digit_bits, count_p, scan_p, scatter_p
 
     def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None,
