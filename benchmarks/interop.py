@@ -1,6 +1,6 @@
 """Figures for issue 14 (interop): export time and sizes, splat round-trip PSNR, retargeting angle errors.
 
-    python3 benchmarks/interop.py [avatar.gma] [--size 256]
+    python3 benchmarks/interop.py [avatar.gma] [--size 256] [--quick]
 
 Without an avatar, a fresh default-config avatar with randomised decoders stands in (varied colours and
 scales). Prints one line per figure.
@@ -72,6 +72,9 @@ def main() -> None:
     ap.add_argument("avatar", nargs="?")
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--motion", action="append", default=[], help="also report feet and root of this motion file")
+    ap.add_argument("--quick", action="store_true",
+                    help="one splat and one mesh export, one round trip (each is a whole command: ~7 s on a 2-core "
+                         "machine; the test suite's smoke run)")
     args = ap.parse_args()
     from gma.avatar import Avatar, AvatarConfig
     from gma.avatar.gpu import AvatarRenderer
@@ -97,8 +100,11 @@ def main() -> None:
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     walk = motion("walk", 16, body)
     save_motion(tmp / "walk.npz", walk)
-    for out, extra in (("a.ply", []), ("a2.ply", ["--format", "2dgs"]), ("a3.ply", ["--sh-degree", "3"]),
-                       ("m.glb", []), ("m.obj", []), ("mt.glb", ["--texture", "1024"])):
+    exports = [("a.ply", []), ("a2.ply", ["--format", "2dgs"]), ("a3.ply", ["--sh-degree", "3"]),
+               ("m.glb", []), ("m.obj", []), ("mt.glb", ["--texture", "1024"])]
+    if args.quick:
+        exports = [exports[0], exports[3]]
+    for out, extra in exports:
         t = _cli("export", path, str(tmp / out), *extra)
         size = (tmp / out).stat().st_size / 1e6
         print(f"export {out:7s} {' '.join(extra):16s} {t:5.1f} s (whole command) {size:6.2f} MB")
@@ -107,12 +113,13 @@ def main() -> None:
     cam = Camera.look_at((0.0, -3.2, 0.0), (0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov_y_deg=40.0,
                          width=args.size, height=args.size)
     (tmp / "cam.json").write_text(json.dumps(cam.to_json()))
-    for label, extra, params in (("canonical", [], {}),
-                                 ("walk frame 7", ["--motion", str(tmp / "walk.npz"), "--frame", "7"],
-                                  {"pose": walk.pose[7], "expression": walk.expression[7]})):
+    views = [("canonical", [], {}),
+             ("walk frame 7", ["--motion", str(tmp / "walk.npz"), "--frame", "7"],
+              {"pose": walk.pose[7], "expression": walk.expression[7]})]
+    for label, extra, params in views[1:] if args.quick else views:
         own = renderer.render(params, cam, background=(0.0, 0.0, 0.0))
         save_png(tmp / "own.png", own)
-        for layout in ("3dgs", "2dgs"):
+        for layout in ("2dgs",) if args.quick else ("3dgs", "2dgs"):
             _cli("export", path, str(tmp / "rt.ply"), "--format", layout, "--force", *extra)
             _cli("render-ply", str(tmp / "rt.ply"), "--camera", str(tmp / "cam.json"), "-o", str(tmp / "rt.png"),
                  "--force")  # one file, rewritten for each export

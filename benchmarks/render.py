@@ -55,6 +55,10 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
     ap.add_argument("--counts", type=int, nargs="+", default=[50_000, 200_000])
+    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
+                    help="surfel counts of the standard comparison scene (none: skip it)")
+    ap.add_argument("--reference-count", type=int, default=5000, help="surfels of the torch reference comparison")
+    ap.add_argument("--reference-size", type=int, default=128, help="image size of the torch reference comparison")
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     ctx = get_context()
@@ -67,9 +71,9 @@ def main() -> int:
     if workload is None:
         print("standard workload not found (../shared/bench/splat_workload.py): skipped")
     else:
-        for n in (20_000, 100_000):
+        for n in args.standard_counts:
             scene, cam = workload_surfels(workload, n)
-            cases.append((f"standard {n // 1000}k", scene, cam))
+            cases.append((f"standard {n / 1000:g}k", scene, cam))
     print(f"{'scene':<14} {'size':>9} {'frame ms':>9} {'isects':>9} {'Meval/s':>8}  per pass (GPU ms)")
     for name, scene, cam in cases:
         wall, passes, isects = bench_forward(ctx, rast, scene, cam, args.repeats)
@@ -80,11 +84,14 @@ def main() -> int:
         size = f"{cam.width}x{cam.height}"
         print(f"{name:<14} {size:>9} {wall:9.1f} {isects:9d} {evals / wall / 1e3:8.0f}  {per_pass}")
     # Speed-up over the reference at a size it can finish (it evaluates every surfel at every pixel).
-    scene, cam = avatar_like_scene(5000), avatar_camera(128, 128)
-    ref = reference_ms(scene, cam, 5000)
+    n_ref, size = args.reference_count, args.reference_size
+    scene, cam = avatar_like_scene(n_ref), avatar_camera(size, size)
+    ref = reference_ms(scene, cam, n_ref)
     wall, _, _ = bench_forward(ctx, rast, scene, cam, args.repeats)
-    print(f"torch reference, 5k surfels at 128x128: {ref:.0f} ms vs WGSL {wall:.1f} ms: {ref / wall:.0f}x faster")
-    rows.append({"scene": "reference-comparison 5k", "reference_ms": ref, "wgsl_ms": wall, "speedup": ref / wall})
+    print(f"torch reference, {n_ref} surfels at {size}x{size}: {ref:.0f} ms vs WGSL {wall:.1f} ms: "
+          f"{ref / wall:.0f}x faster")
+    rows.append({"scene": f"reference-comparison {n_ref / 1000:g}k", "reference_ms": ref, "wgsl_ms": wall,
+                 "speedup": ref / wall})
     if args.json:
         Path(args.json).write_text(json.dumps({"adapter": ctx.name, "machine": machine(), "rows": rows}, indent=1))
     return 0

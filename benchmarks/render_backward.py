@@ -82,6 +82,10 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--counts", type=int, nargs="+", default=[50_000, 200_000])
+    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
+                    help="surfel counts of the standard comparison scene (none: skip it)")
+    ap.add_argument("--reference-count", type=int, default=3000, help="surfels of the torch reference comparison")
+    ap.add_argument("--reference-size", type=int, default=96, help="image size of the torch reference comparison")
     ap.add_argument("--json")
     args = ap.parse_args()
     torch.set_num_threads(1)  # lavapipe needs the cores; torch only glues here
@@ -91,19 +95,21 @@ def main() -> int:
             for n in args.counts]
     workload = load_standard_workload()
     if workload is not None:
-        for n in (20_000, 100_000):
+        for n in args.standard_counts:
             scene, cam = workload_surfels(workload, n)
-            rows.append(bench(ctx, f"standard {n // 1000}k", scene, cam, args.repeats))
+            rows.append(bench(ctx, f"standard {n / 1000:g}k", scene, cam, args.repeats))
     # Reference forward+backward at a size it can finish.
-    scene_np, cam = avatar_like_scene(3000), avatar_camera(96, 96)
+    n_ref, size = args.reference_count, args.reference_size
+    scene_np, cam = avatar_like_scene(n_ref), avatar_camera(size, size)
     t = {k: torch.from_numpy(v).requires_grad_(True) for k, v in scene_np.items()}
     t0 = time.perf_counter()
     ref = rasterize_reference(*(t[k] for k in NAMES), torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K),
                               cam.width, cam.height)
     ref["color"].mean().backward()
     ref_ms = (time.perf_counter() - t0) * 1e3
-    ours = bench(ctx, "ref-size 3k", scene_np, cam, args.repeats)["wall_ms"]["total"]
-    print(f"torch reference fwd+bwd, 3k surfels at 96x96: {ref_ms:.0f} ms vs WGSL {ours:.1f} ms: {ref_ms / ours:.0f}x")
+    ours = bench(ctx, f"ref-size {n_ref / 1000:g}k", scene_np, cam, args.repeats)["wall_ms"]["total"]
+    print(f"torch reference fwd+bwd, {n_ref} surfels at {size}x{size}: {ref_ms:.0f} ms vs WGSL {ours:.1f} ms: "
+          f"{ref_ms / ours:.0f}x")
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak process memory (RSS, lavapipe's GPU memory included): {peak_mb:.0f} MB")
     if args.json:

@@ -57,6 +57,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--preset", default="turn")
     ap.add_argument("--contact-sheet", type=Path, default=None)
+    ap.add_argument("--train-frames", type=int, default=60, help="training frames (then 10 + 10 held out)")
+    ap.add_argument("--texture-size", type=int, default=2048, help="ground-truth texture resolution")
     args = ap.parse_args()
 
     from gma.body import load_body
@@ -69,7 +71,8 @@ def main() -> None:
     ctx = get_context()
     body = load_body("anny")
     t_init = time.perf_counter() - t
-    cfg = SynthConfig(preset=args.preset, seed=args.seed, width=args.size, height=args.size)
+    cfg = SynthConfig(preset=args.preset, seed=args.seed, width=args.size, height=args.size,
+                      train_frames=args.train_frames, texture_size=args.texture_size)
     n = cfg.train_frames + cfg.test_pose_frames + cfg.test_view_frames
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "seq"

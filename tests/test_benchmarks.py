@@ -1,13 +1,17 @@
 """Every benchmark script runs end to end in smoke mode (tiny sizes, a few steps), so none rots between
 the runs that produce the figures. Figures printed here mean nothing; the scripts' defaults give them.
 
-A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one)."""
+A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one). The scripts run two at
+a time (SMOKE_JOBS), started when the first of these tests asks: most of a smoke run is one core starting
+Python, torch and the body model, and one after another they took ~7 of CI's 17 minutes on a 2-core
+machine."""
 
 from __future__ import annotations
 
 import os
 import subprocess
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -19,19 +23,21 @@ HELPERS = {"common.py", "fit_helpers.py"}  # modules the scripts import, not scr
 # script -> arguments that make it small; {tmp} is a fresh folder for its outputs, {repo} this checkout.
 # A string: skip, with why.
 SMOKE: dict[str, list[str] | str] = {
-    "render.py": ["--repeats", "1", "--sizes", "64", "--counts", "500"],
-    "render_backward.py": ["--repeats", "1", "--counts", "500"],
+    "render.py": ["--repeats", "1", "--sizes", "64", "--counts", "500", "--standard-counts", "500",
+                  "--reference-count", "300", "--reference-size", "32"],
+    "render_backward.py": ["--repeats", "1", "--counts", "500", "--standard-counts", "500",
+                           "--reference-count", "300", "--reference-size", "32"],
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
     "shader_ab.py": ["{repo}/shaders/wgsl", "{repo}/shaders/wgsl", "--rounds", "2", "--count", "500"],
     "sort.py": ["--depth-keys", "3000", "--tile-keys", "5000", "--rounds", "2", "--repeat", "1"],
     "body_posing.py": ["--per-face", "1", "--frames", "2"],
-    "synth.py": ["--size", "48"],
+    "synth.py": ["--size", "48", "--train-frames", "4", "--texture-size", "256"],
     "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--fine-per-face", "1"],
     "avatar_decode.py": ["--size", "64"],
     "fit_presets.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
     "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
-    "interop.py": ["--size", "32"],
+    "interop.py": ["--size", "32", "--quick"],
     "edit.py": ["--repeats", "1"],
     "fit_step.py": ["--work", "{tmp}/work", "--baseline", "{repo}"],
     "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
@@ -53,16 +59,39 @@ def test_every_script_has_a_smoke_row():
     assert scripts == set(SMOKE), f"add rows for {sorted(scripts - set(SMOKE))}, drop {sorted(set(SMOKE) - scripts)}"
 
 
+SMOKE_JOBS = min(2, os.cpu_count() or 1)
+
+
+def _skip_reason(script: str) -> str | None:
+    args = SMOKE[script]
+    if isinstance(args, str):
+        return args
+    if script in NEEDS and not NEEDS[script].is_file():
+        return f"needs {NEEDS[script]}, which this checkout lacks"
+    return None
+
+
+def _run_smoke(script: str, folder: Path) -> tuple[list[str], subprocess.CompletedProcess]:
+    env = dict(os.environ, GMA_BENCH_SMOKE="1", PYTHONPATH=str(REPO))
+    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=folder, repo=REPO) for a in SMOKE[script])]
+    return cmd, subprocess.run(cmd, cwd=folder, env=env, capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def smoke_runs(tmp_path_factory, anny_body) -> dict[str, Future]:
+    """Every runnable script's smoke run, started in name order, SMOKE_JOBS at a time. (``anny_body``: the
+    body model's cache exists before two scripts could both set out to build it.)"""
+    with ThreadPoolExecutor(SMOKE_JOBS, thread_name_prefix="smoke") as pool:
+        yield {script: pool.submit(_run_smoke, script, tmp_path_factory.mktemp(Path(script).stem))
+               for script in sorted(SMOKE) if _skip_reason(script) is None}
+
+
 @pytest.mark.slow
 @pytest.mark.gpu
 @pytest.mark.parametrize("script", sorted(SMOKE))
-def test_benchmark_runs(script, tmp_path):
-    args = SMOKE[script]
-    if isinstance(args, str):
-        pytest.skip(args)
-    if script in NEEDS and not NEEDS[script].is_file():
-        pytest.skip(f"needs {NEEDS[script]}, which this checkout lacks")
-    env = dict(os.environ, GMA_BENCH_SMOKE="1", PYTHONPATH=str(REPO))
-    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=tmp_path, repo=REPO) for a in args)]
-    out = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+def test_benchmark_runs(script, smoke_runs):
+    reason = _skip_reason(script)
+    if reason:
+        pytest.skip(reason)
+    cmd, out = smoke_runs[script].result()
     assert out.returncode == 0, f"{' '.join(cmd)}\n{out.stdout[-2000:]}\n{out.stderr[-3000:]}"
