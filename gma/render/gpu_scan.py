@@ -21,7 +21,8 @@ class ExclusiveScan:
         self.workspace = workspace or Workspace(ctx)
 
     def encode(self, encoder: wgpu.GPUCommandEncoder, values: wgpu.GPUBuffer, out: wgpu.GPUBuffer,
-               count: int, index: wgpu.GPUBuffer | None = None, level: int = 0) -> None:
+               count: int, index: wgpu.GPUBuffer | None = None, level: int = 0, timer=None) -> None:
+        """Encode the scan; with a :class:`~gma.gpu.PassTimer` its passes are timed as "scan"."""
         ctx = self.ctx
         if count == 0:
             return
@@ -34,16 +35,16 @@ class ExclusiveScan:
         gather = index is not None
         blocks_p = ctx.compute_pipeline("render/scan_blocks.wgsl", {"GATHER": gather})
         bind = [params, values, index if gather else values, out, sums]
-        cp = encoder.begin_compute_pass()
+        cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("scan") if timer else None)
         cp.set_pipeline(blocks_p)
         cp.set_bind_group(0, ctx.bind_group(blocks_p, bind))
         cp.dispatch_workgroups(blocks)
         cp.end()
         if blocks > 1:
             offsets = self.workspace.get(f"scan.block_offsets.{level}", 4 * blocks)
-            self.encode(encoder, sums, offsets, blocks, level=level + 1)
+            self.encode(encoder, sums, offsets, blocks, level=level + 1, timer=timer)
             add_p = ctx.compute_pipeline("render/scan_add.wgsl")
-            cp = encoder.begin_compute_pass()
+            cp = encoder.begin_compute_pass(timestamp_writes=timer.writes("scan") if timer else None)
             cp.set_pipeline(add_p)
             cp.set_bind_group(0, ctx.bind_group(add_p, [params, offsets, out]))
             groups = (count + 255) // 256

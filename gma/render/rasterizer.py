@@ -247,7 +247,7 @@ class SurfelRasterizer:
         self.ctx.write(depth_info, dispatch_info(n, SORT_BLOCK))
         self.sorter.encode(encoder, depth_info, st.depth_keys, st.depth_order, n, key_bits, timer,
                            base=(st.stats, 2))
-        self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order)
+        self.scan.encode(encoder, st.tile_counts, st.isect_offsets, n, index=st.depth_order, timer=timer)
 
     def _setup(self, encoder, st: ProjectionState, timer) -> None:
         setup = self.ctx.compute_pipeline("render/isect_setup.wgsl")
