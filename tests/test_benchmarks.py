@@ -78,12 +78,15 @@ def _run_smoke(script: str, folder: Path) -> tuple[list[str], subprocess.Complet
 
 
 @pytest.fixture(scope="module")
-def smoke_runs(tmp_path_factory, anny_body) -> dict[str, Future]:
-    """Every runnable script's smoke run, started in name order, SMOKE_JOBS at a time. (``anny_body``: the
-    body model's cache exists before two scripts could both set out to build it.)"""
+def smoke_runs(request, tmp_path_factory, anny_body) -> dict[str, Future]:
+    """The smoke runs of the runnable scripts whose tests were selected (``-k``), started in name order,
+    SMOKE_JOBS at a time. (``anny_body``: the body model's cache exists before two scripts could both set
+    out to build it.)"""
+    selected = {item.callspec.params["script"] for item in request.session.items
+                if getattr(item, "originalname", None) == "test_benchmark_runs"}
     with ThreadPoolExecutor(SMOKE_JOBS, thread_name_prefix="smoke") as pool:
         yield {script: pool.submit(_run_smoke, script, tmp_path_factory.mktemp(Path(script).stem))
-               for script in sorted(SMOKE) if _skip_reason(script) is None}
+               for script in sorted(selected) if _skip_reason(script) is None}
 
 
 @pytest.mark.slow
