@@ -3,8 +3,8 @@ the runs that produce the figures. Figures printed here mean nothing; the script
 
 A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one). The scripts run two at
 a time (SMOKE_JOBS), started when the first of these tests asks: most of a smoke run is one core starting
-Python, torch and the body model, and one after another they took ~7 of CI's 17 minutes on a 2-core
-machine."""
+Python, torch and the body model, and one after another they took ~9 of the suite's 16 minutes on a
+2-core AMD VM (two at a time: ~4)."""
 
 from __future__ import annotations
 
