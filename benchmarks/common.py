@@ -47,6 +47,17 @@ def load_standard_workload():
     return module
 
 
+def add_scene_args(ap, reference_count: int, reference_size: int) -> None:
+    """The renderer benchmarks' options for the standard scene's sizes and the torch reference comparison
+    (render.py, render_backward.py; the smoke tests make them tiny)."""
+    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
+                    help="surfel counts of the standard comparison scene (none: skip it)")
+    ap.add_argument("--reference-count", type=int, default=reference_count,
+                    help="surfels of the torch reference comparison")
+    ap.add_argument("--reference-size", type=int, default=reference_size,
+                    help="image size of the torch reference comparison")
+
+
 def workload_surfels(module, n: int) -> tuple[dict, object]:
     """Standard scene as 2D surfels (third scale dropped) and its camera."""
     import numpy as np

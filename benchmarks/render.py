@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import load_standard_workload, machine, median_dict, workload_surfels  # noqa: E402
+from common import add_scene_args, load_standard_workload, machine, median_dict, workload_surfels  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.render import SurfelBuffers, SurfelRasterizer, rasterize_reference, read_outputs  # noqa: E402
@@ -55,10 +55,7 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--sizes", type=int, nargs="+", default=[512, 1024])
     ap.add_argument("--counts", type=int, nargs="+", default=[50_000, 200_000])
-    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
-                    help="surfel counts of the standard comparison scene (none: skip it)")
-    ap.add_argument("--reference-count", type=int, default=5000, help="surfels of the torch reference comparison")
-    ap.add_argument("--reference-size", type=int, default=128, help="image size of the torch reference comparison")
+    add_scene_args(ap, reference_count=5000, reference_size=128)
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     ctx = get_context()

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import load_standard_workload, machine, median_dict, workload_surfels  # noqa: E402
+from common import add_scene_args, load_standard_workload, machine, median_dict, workload_surfels  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.render import Camera, rasterize, rasterize_reference  # noqa: E402
@@ -82,10 +82,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--counts", type=int, nargs="+", default=[50_000, 200_000])
-    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
-                    help="surfel counts of the standard comparison scene (none: skip it)")
-    ap.add_argument("--reference-count", type=int, default=3000, help="surfels of the torch reference comparison")
-    ap.add_argument("--reference-size", type=int, default=96, help="image size of the torch reference comparison")
+    add_scene_args(ap, reference_count=3000, reference_size=96)
     ap.add_argument("--json")
     args = ap.parse_args()
     torch.set_num_threads(1)  # lavapipe needs the cores; torch only glues here
