@@ -50,11 +50,13 @@ def load_standard_workload():
 def add_scene_args(ap, reference_count: int, reference_size: int) -> None:
     """The renderer benchmarks' options for the standard scene's sizes and the torch reference comparison
     (render.py, render_backward.py; the smoke tests make them tiny)."""
-    ap.add_argument("--standard-counts", type=int, nargs="*", default=[20_000, 100_000],
+    from gma.core.args import positive_int
+
+    ap.add_argument("--standard-counts", type=positive_int, nargs="*", default=[20_000, 100_000],
                     help="surfel counts of the standard comparison scene (none: skip it)")
-    ap.add_argument("--reference-count", type=int, default=reference_count,
+    ap.add_argument("--reference-count", type=positive_int, default=reference_count,
                     help="surfels of the torch reference comparison")
-    ap.add_argument("--reference-size", type=int, default=reference_size,
+    ap.add_argument("--reference-size", type=positive_int, default=reference_size,
                     help="image size of the torch reference comparison")
 
 

@@ -76,6 +76,8 @@ def main() -> None:
                     help="one splat and one mesh export, one round trip (each is a whole command: ~7 s on a 2-core "
                          "machine; the test suite's smoke run)")
     args = ap.parse_args()
+    if args.avatar is not None and not Path(args.avatar).is_file():
+        ap.error(f"{args.avatar}: avatar file not found")
     from gma.avatar import Avatar, AvatarConfig
     from gma.avatar.gpu import AvatarRenderer
     from gma.body import load_body

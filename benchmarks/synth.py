@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from gma.core.args import positive_int  # noqa: E402
 
 
 def _du(path: Path) -> int:
@@ -57,8 +58,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--preset", default="turn")
     ap.add_argument("--contact-sheet", type=Path, default=None)
-    ap.add_argument("--train-frames", type=int, default=60, help="training frames (then 10 + 10 held out)")
-    ap.add_argument("--texture-size", type=int, default=2048, help="ground-truth texture resolution")
+    ap.add_argument("--train-frames", type=positive_int, default=60, help="training frames (then 10 + 10 held out)")
+    ap.add_argument("--texture-size", type=positive_int, default=2048, help="ground-truth texture resolution")
     args = ap.parse_args()
 
     from gma.body import load_body
