@@ -59,7 +59,7 @@ class ProjectionState:
 @dataclass
 class RecordIndex:
     """Where a render's backward pass writes and finds per-intersection gradient records (see
-    flush_records in rasterize_bwd.wgsl): the tile-sorted keys, which carry each intersection's number
+    store_record in tile_walk_bwd.wgsl): the tile-sorted keys, which carry each intersection's number
     within its surfel's list, and each surfel's first emission index."""
 
     isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
@@ -92,7 +92,7 @@ class ForwardState:
 
 
 def _record_bytes(num_isects: int, normal_depth: bool) -> int:
-    """Bytes of a backward pass's gradient records (flush_records in rasterize_bwd.wgsl): per
+    """Bytes of a backward pass's gradient records (store_record in tile_walk_bwd.wgsl): per
     intersection 16 values, and with normal/depth gradients 4 colours after them."""
     return 4 * (20 if normal_depth else 16) * max(num_isects, 1)
 
@@ -136,7 +136,7 @@ class SurfelRasterizer:
         self.use_subgroups = capable and (ctx.is_software if wanted == "auto" else wanted in ("1", "true", "on"))
         # On lavapipe the subgroup backward adds its gradients into per-intersection records with plain
         # loads and stores instead of per-surfel atomics (faster, and the same gradients on every run; see
-        # flush_records in rasterize_bwd.wgsl for why this is safe there only). Tests switch it off to
+        # store_record in tile_walk_bwd.wgsl for why this is safe there only). Tests switch it off to
         # exercise the atomics.
         self.use_grad_records = self.use_subgroups and ctx.is_lavapipe and ctx.subgroup_size == 8
         self._zeroed_records: tuple[wgpu.GPUBuffer, int] | None = None  # see _cleared_records
@@ -157,9 +157,10 @@ class SurfelRasterizer:
         fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
         while batch > 32 and batch * per_surfel + fixed > limit:
             batch //= 2
-        defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1}
+        defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1, "TILE_WALK": False}
         if sg:
-            defines.update(USE_SUBGROUPS=True, SG=sg)
+            # 8 lanes (lavapipe): one subgroup composites a whole tile (tile_walk_fwd.wgsl).
+            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=sg == 8)
         return defines
 
     def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
@@ -437,8 +438,10 @@ class SurfelRasterizer:
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
+        # The backward's tile walk writes gradient records (tile_walk_bwd.wgsl); with atomics each
+        # subgroup replays its own block.
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
-                       GRAD_RECORDS=records is not None)
+                       GRAD_RECORDS=records is not None, TILE_WALK=defines["TILE_WALK"] and records is not None)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
@@ -496,7 +499,7 @@ class SurfelRasterizer:
         return self.workspace.get("zeros", nbytes)
 
     def _cleared_records(self, enc, num_isects: int, normal_depth: bool) -> wgpu.GPUBuffer:
-        """Zeroed gradient records (flush_records in rasterize_bwd.wgsl). Scratch: backward reads the
+        """Zeroed gradient records (store_record in tile_walk_bwd.wgsl). Scratch: backward reads the
         gradients back before it returns. Cleared here only when the previous backward did not leave
         them zeroed (see _clear_records_for_next)."""
         nbytes = _record_bytes(num_isects, normal_depth)

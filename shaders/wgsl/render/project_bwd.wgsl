@@ -3,8 +3,8 @@
 // and scales, by recomputing the forward projection (cheaper than storing its intermediates).
 // Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
 // the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
-// Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection (flush_records in
-// rasterize_bwd.wgsl); a surfel's are listed, in emission order, at slots[record_base ..
+// Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection (store_record in
+// tile_walk_bwd.wgsl); a surfel's are listed, in emission order, at slots[record_base ..
 // record_base + tile count) (record_slots.wgsl) and summed here in that order, the same on every run,
 // into the projection and colour gradients (NORMAL_DEPTH_GRADS says which record layout).
 // COLORS_OUT: this pass writes v_colors (with COLOR_IN_PROJ or GRAD_RECORDS).
@@ -50,7 +50,7 @@ const RECORD_VEC4S: u32 = 5u;
 const RECORD_VEC4S: u32 = 4u;
 #endif
 
-// Sum of surfel i's records. A record holds V0-15 of flush_records pairwise, (V[l], V[l + 8]) as vec2
+// Sum of surfel i's records. A record holds V0-15 of store_record pairwise, (V[l], V[l + 8]) as vec2
 // number l, so its vec4s are (V0 V8 V1 V9) (V2 V10 V3 V11) (V4 V12 V5 V13) (V6 V14 V7 V15), with
 // V0-2 = dL/dT0, V3 opacity, V4-6 = dL/dT1, V7 mu2d.x, V8-10 = dL/dT2, V11 mu2d.y, V12-15 = normal and
 // depth (a fifth vec4 then holds the colours) or the colours. Tried: one thread per intersection in

@@ -6,7 +6,8 @@
 // ALPHA_GRADS (false when no loss reads the alpha image: its upstream is then zero, its terms dropped),
 // NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
 // are then zero and neither summed nor scattered; the buffer entries stay zero), and GRAD_RECORDS
-// (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics; see flush_records).
+// (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics, see below), and
+// TILE_WALK (with GRAD_RECORDS: one subgroup per tile, tile_walk_bwd.wgsl).
 #include "render/rasterize_core.wgsl"
 #include "render/grad_atomics.wgsl"
 
@@ -199,17 +200,16 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 #if GRAD_RECORDS
 // Gradient records: one per intersection, at its place in the tile-sorted list, RECORD_VEC2S vec2s
 // each, zeroed before the pass and summed per surfel by project_bwd.wgsl (record_slots.wgsl lists each
-// surfel's records). Every subgroup of the tile's workgroup that the surfel reaches adds its totals to
-// the record with plain loads and stores: no other workgroup touches it, and lavapipe runs a
-// workgroup's subgroups one after another on one thread, switching only at barriers (there are none
-// between a flush's load and store), while a subgroup's lanes own distinct elements. Hence only on lavapipe (SurfelRasterizer.use_grad_records). Against a float
-// atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about a third of this
-// pass) and with each lane's two totals adjacent (one vec2 load and store per lane instead of two
-// scalar atomics): standard scene, 100k surfels, same runs, this pass 92.6-94.3 against 115.0-117.0 ms,
-// the sums +12 ms (record_slots 2.5, project_bwd 15 against 5.6), the public call in one process,
-// interleaved, forward 0.98x and backward 0.96x. Records at the emission index instead, so that the
-// sums read them in order, made this pass ~12 ms slower (scattered read-modify-writes). The sums run in
-// a fixed order, so the gradients are the same on every run, also under load.
+// surfel's records). The tile walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each
+// record once, from the one subgroup that replays the tile. Hence only on lavapipe
+// (SurfelRasterizer.use_grad_records; GPUs keep per-surfel atomics). Against a float atomic per value (on
+// lavapipe a per-lane loop of locked compare-and-exchanges, about a third of this pass), when every
+// subgroup of the tile added its totals to the record with a read-modify-write: standard scene, 100k
+// surfels, same runs, this pass 92.6-94.3 against 115.0-117.0 ms, the sums +12 ms (record_slots 2.5,
+// project_bwd 15 against 5.6), the public call in one process, interleaved, forward 0.98x and backward
+// 0.96x. Records at the emission index instead, so that the sums read them in order, made that pass
+// ~12 ms slower (scattered read-modify-writes). The sums run in a fixed order, so the gradients are
+// the same on every run, also under load.
 @group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]
 
 #if NORMAL_DEPTH_GRADS
@@ -218,22 +218,9 @@ const RECORD_VEC2S: u32 = 10u;   // V0-15 as below, then the colours 0-3
 const RECORD_VEC2S: u32 = 8u;    // V0-15 (the colours in V12-15)
 #endif
 
-// Add a hit's totals over the subgroup (see flush_scattered8 for a, b, c, tail, e) to record `rec`:
-// lane l holds V[l] and V[l + 8] and adds them to the record's vec2 number l.
-fn flush_records(rec: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, tail: vec4<f32>, e: vec4<f32>,
-                 sg_lane: u32) {
-    let t = scatter16(a, b, c, tail, sg_lane);
-    let r = rec * RECORD_VEC2S + sg_lane;
-    records[r] += t;
-#if NORMAL_DEPTH_GRADS
-    let e_total = scatter_colors8(e, sg_lane);   // lanes 0, 2, 4, 6: colours 0-3
-    let ch = sg_lane >> 1u;
-    if (sg_lane & 1u) == 0u && ch < CHANNELS {
-        records[rec * RECORD_VEC2S + 8u + (ch >> 1u)][ch & 1u] += e_total;
-    }
 #endif
-}
-#else
+
+#if !GRAD_RECORDS
 // Add a hit's gradient totals over the subgroup to surfel `sid`'s gradients: a, b, c (the packed
 // projection values, see proj_component), d (normal, depth), e (colours), one lane's share each.
 // Butterfly sums over the subgroup: on CPU drivers subgroupAdd is far slower than log2(SG) xor-shuffles
@@ -352,6 +339,9 @@ fn value_slot(j: u32) -> u32 {
     return select(select(3u * v + (j & 3u), w_slot, (j & 3u) == 3u), j, j >= 12u);
 }
 
+#if TILE_WALK
+#include "render/tile_walk_bwd.wgsl"
+#else
 @compute @workgroup_size(64)   // RASTER_THREADS
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
         @builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_id) sg_id: u32) {
@@ -429,20 +419,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #else
                     let tail = g_col;   // the colour gradients, in the normal and depth slots
 #endif
-#if GRAD_RECORDS
-                    flush_records(range.x + idx, a, b, c, tail, g_col, sg_lane);
-#else
                     if SG == 8u {   // constant after inlining
                         flush_scattered8(sid, a, b, c, tail, g_col, sg_lane);
                     } else {
                         flush_butterfly(sid, a, b, c, q.v_nd, g_col, sg_lane);
                     }
-#endif
                 }
             }
         }
     }
 }
+
+#endif
 
 #if NORMAL_DEPTH_GRADS
 const PROJ_VALUES: u32 = 16u;

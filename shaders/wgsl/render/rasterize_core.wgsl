@@ -294,6 +294,12 @@ fn tile_pixel_quad(lid: u32) -> vec2<u32> {
     return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 2u) & 8u) | ((lid >> 2u) & 1u));
 }
 
+// First pixel (global) of lane `sg_lane` in 4x8 block `g` of the tile at `origin`: the pixel that
+// tile_pixel_quad gives thread 8 g + sg_lane (block g = bit g of tile_block_bits: column g & 3, band g >> 2).
+fn block_first_pixel(origin: vec2<u32>, g: u32, sg_lane: u32) -> vec2<u32> {
+    return origin + vec2<u32>(4u * (g & 3u) + (sg_lane & 3u), 8u * (g >> 2u) + ((sg_lane >> 2u) & 1u));
+}
+
 // Blocks of the tile (see block_bit) that the pixels of a thread whose first pixel is `p` lie in.
 fn quad_blocks(p: vec2<u32>) -> u32 {
     return block_bit(p) | block_bit(p + ROW_STEP) | block_bit(p + 2u * ROW_STEP) | block_bit(p + 3u * ROW_STEP);

@@ -2,6 +2,9 @@
 // write_pixel(pix, result) and includes this file (WGSL resolves module-scope names in any order).
 
 // One-dimensional workgroups: subgroup builtins are only defined for those.
+#if TILE_WALK
+#include "render/tile_walk_fwd.wgsl"
+#else
 #if USE_SUBGROUPS
 @compute @workgroup_size(64)   // RASTER_THREADS: four pixels per thread (see composite_quad)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32,
@@ -24,4 +27,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let inside = pix.x < params.image_size.x && pix.y < params.image_size.y;
     write_pixel(pix, composite_pixel(wg.y * params.tile_grid.x + wg.x, vec2<f32>(pix) + 0.5, inside, lid));
 }
+#endif
 #endif

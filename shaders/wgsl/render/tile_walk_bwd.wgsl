@@ -1,0 +1,171 @@
+// The backward rasterizer's entry point for 8-lane CPU drivers with gradient records (TILE_WALK and
+// GRAD_RECORDS: lavapipe): one subgroup replays the whole 16x16 tile, as tile_walk_fwd.wgsl composites
+// it. Included by rasterize_bwd.wgsl, whose replay arithmetic (replay_hit, quad_alpha) it uses.
+//
+// It walks the tile's list once, back to front, reads each intersection's surfel once (one per lane,
+// 8 at a time, passed around by shuffles), and replays it in every block of the tile that its block bits
+// reach and that still has a pixel whose last contributor lies behind it, keeping the eight blocks'
+// replay states (BlockReplay) in its registers and stack. The surfel's gradient is summed over the
+// lane's pixels of all those blocks, then over the lanes (reduce-scatter), and written to its record
+// once, with plain stores: no other subgroup writes it. The per-subgroup variant (main in
+// rasterize_bwd.wgsl) flushed it once per block it reached, each a read-modify-write of the record
+// (2.46 blocks per intersection on the standard scene), and every subgroup scanned the whole tile list.
+// The gradients' sums run in another order than there (within float rounding; the same on every run).
+// Standard scene, 100k surfels, lavapipe (Mesa 25.0.7, 2-core AMD EPYC), both variants in one process
+// (benchmarks/shader_ab.py, 24 rounds): forward rasterize 0.935x, backward rasterize 0.925x, images
+// bit-identical.
+
+struct BlockReplay {
+    a: PixelReplay,
+    b: PixelReplay,
+    c: PixelReplay,
+    d: PixelReplay,
+    count: u32,   // local intersections before the block's furthest last contributor (subgroup-uniform)
+}
+
+// A hit's gradient over the lanes' pixels of every block it reached, packed as in the per-subgroup variant's
+// flush (a, b, c: the T rows, opacity and centre), nd (normal and depth) and e (colours), per lane; `any`: some
+// pixel took the surfel.
+struct HitTotals {
+    a: vec4<f32>,
+    b: vec4<f32>,
+    c: vec4<f32>,
+    nd: vec4<f32>,
+    e: vec4<f32>,
+    any: bool,
+}
+
+fn start_block_replay(origin: vec2<u32>, g: u32, sg_lane: u32) -> BlockReplay {
+    let pix = block_first_pixel(origin, g, sg_lane);
+    var r: BlockReplay;
+    r.a = start_replay(pix);
+    r.b = start_replay(pix + ROW_STEP);
+    r.c = start_replay(pix + 2u * ROW_STEP);
+    r.d = start_replay(pix + 3u * ROW_STEP);
+    r.count = subgroupBroadcast(lanes_max(max(max(r.a.last, r.b.last), max(r.c.last, r.d.last))), 0u);
+    return r;
+}
+
+// Bit g when block g has a pixel whose last contributor lies behind local intersection `idx`.
+fn block_live(r: BlockReplay, g: u32, idx: u32) -> u32 {
+    return select(0u, 1u << g, idx < r.count);
+}
+
+// Replay surfel `s` in one block (the per-subgroup variant's hit step) and add its gradient to `t`.
+// The states are copied into values of this call and back (a pointer to a member of *r made naga
+// 29 panic while writing SPIR-V).
+fn replay_block(s: ProjectedSurfel, nd: vec4<f32>, col: vec4<f32>, idx: u32, r: ptr<function, BlockReplay>,
+                t: ptr<function, HitTotals>) {
+    var q = QuadGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
+    var hit_a = false;
+    var hit_b = false;
+    var hit_c = false;
+    var hit_d = false;
+    var pa = (*r).a;
+    var pb = (*r).b;
+    var pc = (*r).c;
+    var pd = (*r).d;
+    let ca = column_alpha(s, pa.px);
+    let g_col = replay_hit(quad_alpha(s, ca, 0u), 0u, nd, col, idx, &pa, &q, &hit_a)
+              + replay_hit(quad_alpha(s, ca, 1u), 1u, nd, col, idx, &pb, &q, &hit_b)
+              + replay_hit(quad_alpha(s, ca, 2u), 2u, nd, col, idx, &pc, &q, &hit_c)
+              + replay_hit(quad_alpha(s, ca, 3u), 3u, nd, col, idx, &pd, &q, &hit_d);
+    (*r).a = pa;
+    (*r).b = pb;
+    (*r).c = pc;
+    (*r).d = pd;
+    if any_lane(hit_a || hit_b || hit_c || hit_d) {
+        // d/dT of the four pixels at once, as in the per-subgroup variant's main.
+        let s_hu = cross(ca.h_v, q.v_p) + cross(s.t2.xyz, q.v_p_dy);
+        let s_hv = cross(q.v_p, ca.h_u);
+        let v_t2 = pa.px.x * s_hu + pa.px.y * s_hv + cross(q.v_p_dy, ca.h_u);
+        (*t).a += vec4<f32>(-s_hu, q.v_opacity);
+        (*t).b += vec4<f32>(-s_hv, q.v_mu2d.x);
+        (*t).c += vec4<f32>(v_t2, q.v_mu2d.y);
+        (*t).nd += q.v_nd;
+        (*t).e += g_col;
+        (*t).any = true;
+    }
+}
+
+// Write a hit's totals to record `rec`: lane l stores V[l] and V[l + 8] (as
+// flush_scattered8 adds them).
+fn store_record(rec: u32, t: HitTotals, sg_lane: u32) {
+#if NORMAL_DEPTH_GRADS
+    let tail = t.nd;
+#else
+    let tail = t.e;   // the colour gradients, in the normal and depth slots
+#endif
+    records[rec * RECORD_VEC2S + sg_lane] = scatter16(t.a, t.b, t.c, tail, sg_lane);
+#if NORMAL_DEPTH_GRADS
+    let e_total = scatter_colors8(t.e, sg_lane);   // lanes 0, 2, 4, 6: colours 0-3
+    let ch = sg_lane >> 1u;
+    if (sg_lane & 1u) == 0u && ch < CHANNELS {
+        records[rec * RECORD_VEC2S + 8u + (ch >> 1u)][ch & 1u] = e_total;
+    }
+#endif
+}
+
+@compute @workgroup_size(8)   // one subgroup (SG = 8) per tile
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
+    let tile = wg.y * params.tile_grid.x + wg.x;
+    let origin = wg.xy * TILE_SIZE;
+    var r0 = start_block_replay(origin, 0u, sg_lane);
+    var r1 = start_block_replay(origin, 1u, sg_lane);
+    var r2 = start_block_replay(origin, 2u, sg_lane);
+    var r3 = start_block_replay(origin, 3u, sg_lane);
+    var r4 = start_block_replay(origin, 4u, sg_lane);
+    var r5 = start_block_replay(origin, 5u, sg_lane);
+    var r6 = start_block_replay(origin, 6u, sg_lane);
+    var r7 = start_block_replay(origin, 7u, sg_lane);
+    let range = ranges[tile];
+    let furthest = max(max(max(r0.count, r1.count), max(r2.count, r3.count)),
+                       max(max(r4.count, r5.count), max(r6.count, r7.count)));
+    let count = min(range.y - range.x, furthest);
+    for (var end = count; end > 0u; end -= min(end, SG)) {   // groups of SG, from the back
+        let h0 = end - min(end, SG);
+        let n = end - h0;
+        let mine_id = isect_ids[range.x + h0 + min(sg_lane, n - 1u)];
+        let mine_sid = mine_id & SURFEL_ID_MASK;
+        // Field by field, the normal and depth only when their gradients are wanted (see main).
+        let mine_t0 = projected[mine_sid].t0;
+        let mine_t1 = projected[mine_sid].t1;
+        let mine_t2 = projected[mine_sid].t2;
+        let mine_col = colors4[mine_sid];
+#if NORMAL_DEPTH_GRADS
+        let mine_nd = projected[mine_sid].normal_depth;
+#endif
+        for (var kk = 0u; kk < n; kk++) {
+            let k = n - 1u - kk;   // back to front
+            let idx = h0 + k;      // local intersection index in the tile
+            let live = block_live(r0, 0u, idx) | block_live(r1, 1u, idx) | block_live(r2, 2u, idx)
+                     | block_live(r3, 3u, idx) | block_live(r4, 4u, idx) | block_live(r5, 5u, idx)
+                     | block_live(r6, 6u, idx) | block_live(r7, 7u, idx);
+            // Lane 0's copy of the shuffled id: uniform, so the branches below are jumps.
+            let blocks = (subgroupBroadcast(subgroupShuffle(mine_id, k), 0u) >> SURFEL_ID_BITS) & live;
+            if blocks != 0u {
+#if NORMAL_DEPTH_GRADS
+                let nd = subgroupShuffle(mine_nd, k);
+#else
+                let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd
+#endif
+                let s = ProjectedSurfel(subgroupShuffle(mine_t0, k), subgroupShuffle(mine_t1, k),
+                                        subgroupShuffle(mine_t2, k), nd);
+                let col = subgroupShuffle(mine_col, k);
+                var t = HitTotals(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0),
+                                  vec4<f32>(0.0), false);
+                if (blocks & 1u) != 0u { replay_block(s, nd, col, idx, &r0, &t); }
+                if (blocks & 2u) != 0u { replay_block(s, nd, col, idx, &r1, &t); }
+                if (blocks & 4u) != 0u { replay_block(s, nd, col, idx, &r2, &t); }
+                if (blocks & 8u) != 0u { replay_block(s, nd, col, idx, &r3, &t); }
+                if (blocks & 16u) != 0u { replay_block(s, nd, col, idx, &r4, &t); }
+                if (blocks & 32u) != 0u { replay_block(s, nd, col, idx, &r5, &t); }
+                if (blocks & 64u) != 0u { replay_block(s, nd, col, idx, &r6, &t); }
+                if (blocks & 128u) != 0u { replay_block(s, nd, col, idx, &r7, &t); }
+                if t.any {   // else the record keeps its zeros
+                    store_record(range.x + idx, t, sg_lane);
+                }
+            }
+        }
+    }
+}
