@@ -30,7 +30,7 @@ from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E4
 from gma.render.rasterizer import MAX_WORKGROUPS  # noqa: E402
 
 MAX_SURFELS = MAX_WORKGROUPS * 256
-PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "record_slots", "project_bwd")
+PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "project_bwd")
 
 
 def scene_and_camera(count: int):

@@ -49,20 +49,6 @@ def test_radix_sort_from_a_separate_source(gpu, bits, variant):
     np.testing.assert_array_equal(sorted_keys, keys[order])
 
 
-@pytest.mark.parametrize("n", [3, 9, LANE_BLOCK + 5, 30_000])
-@pytest.mark.parametrize("separate", [False, True])
-def test_one_pass_lane_sort_writes_ranks(gpu, n, separate):
-    # ranks[i]: where pair i landed (the renderer's record slots); only a one-pass lane sort offers them.
-    s = sorter(gpu, "lanes")
-    keys = np.random.default_rng(n).integers(0, 1500, n).astype(np.uint32)
-    assert s.ranks_in_one_pass(11) and not s.ranks_in_one_pass(12)
-    sorted_keys, order, ranks = s.sort(keys, bits=11, separate=separate, ranks=True)
-    np.testing.assert_array_equal(order, np.argsort(keys, kind="stable"))
-    np.testing.assert_array_equal(ranks[order], np.arange(n))
-    with pytest.raises(ValueError, match="cannot write ranks"):
-        s.sort(keys, bits=12, ranks=True)
-
-
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_radix_sort_orders_only_the_low_bits(gpu, variant):
     # As the tile sort of a replayed render: record numbers ride above the 10 sorted bits, unsorted.

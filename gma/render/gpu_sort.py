@@ -68,20 +68,15 @@ class RadixSorter:
     def encode(self, encoder: wgpu.GPUCommandEncoder, info: wgpu.GPUBuffer, keys: wgpu.GPUBuffer,
                values: wgpu.GPUBuffer, capacity: int, bits: int, timer=None,
                base: tuple[wgpu.GPUBuffer, int] | None = None,
-               source: tuple[wgpu.GPUBuffer, wgpu.GPUBuffer] | None = None,
-               ranks: wgpu.GPUBuffer | None = None) -> None:
+               source: tuple[wgpu.GPUBuffer, wgpu.GPUBuffer] | None = None) -> None:
         """Encode the sort; the result ends up in ``keys``/``values``. With ``base`` (a buffer and the
         index of a u32 in it) the sort orders ``key - base`` by its low ``bits`` (wrapping), for keys that
         lie within ``2**bits`` above the base. With ``source`` (keys, values) the pairs are read from there
         and ``keys``/``values`` only receive them (no copy at the end for an odd number of passes, as the
-        in-place sort needs; the renderer's tile sort takes one pass on lavapipe); the source is left as is.
-        With ``ranks`` (only where :meth:`ranks_in_one_pass`) each pair's sorted position is written at its
-        input position."""
+        in-place sort needs; the renderer's tile sort takes one pass on lavapipe); the source is left as is."""
         ctx = self.ctx
         extra = [base[0]] if base else []
-        if ranks is not None and not self.ranks_in_one_pass(bits):
-            raise ValueError(f"a {bits}-bit sort cannot write ranks here (see ranks_in_one_pass)")
-        digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base, ranks is not None)
+        digit_bits, count_p, scan_p, scatter_p = self._pipelines(bits, base)
         groups = -(-sort_blocks(capacity) // self.group_blocks)   # histogram columns: one per workgroup
         hist = self.workspace.get("sort.hist", (4 << digit_bits) * groups)
         tmp = (self.workspace.get("sort.keys_tmp", 4 * capacity), self.workspace.get("sort.vals_tmp", 4 * capacity))
@@ -101,10 +96,7 @@ class RadixSorter:
             cp.set_bind_group(0, scan_bg)
             cp.dispatch_workgroups(1)
             cp.set_pipeline(scatter_p[i])
-            scattered = dict(enumerate([info, hist, src[0], src[1], dst[0], dst[1]] + extra))
-            if ranks is not None:
-                scattered[7] = ranks
-            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], scattered))
+            cp.set_bind_group(0, ctx.bind_group(scatter_p[i], [info, hist, src[0], src[1], dst[0], dst[1]] + extra))
             cp.dispatch_workgroups_indirect(info, 0)
             cp.end()
             src = dst
@@ -122,12 +114,7 @@ class RadixSorter:
         """Count/scan/scatter rounds of a ``bits``-bit sort."""
         return max(1, -(-bits // (self.max_digit_bits if self.lanes else RADIX_BITS)))
 
-    def ranks_in_one_pass(self, bits: int) -> bool:
-        """Whether a ``bits``-bit sort can write each pair's sorted position (encode's ``ranks``): the
-        lane-ordered variant in one pass, whose scatter still sees the input order."""
-        return self.lanes and self.passes(bits) == 1
-
-    def _pipelines(self, bits: int, base, ranks: bool = False):
+    def _pipelines(self, bits: int, base):
         """Digit width and the pipelines of a ``bits``-bit sort: count and scatter per pass, and the scan."""
         ctx = self.ctx
         keyed = {"KEY_BASE": True, "KEY_BASE_WORD": base[1]} if base else {}
@@ -140,37 +127,33 @@ class RadixSorter:
             folder, defines = "sort/radix", {"SORT_WG": self.threads, **keyed}
         count_p = [ctx.compute_pipeline(f"{folder}_count.wgsl", {"SHIFT": digit_bits * i, **defines})
                    for i in range(passes)]
-        scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines,
-                                                                        **({"RANKS": True} if ranks else {})})
+        scatter_p = [ctx.compute_pipeline(f"{folder}_scatter.wgsl", {"SHIFT": digit_bits * i, **defines})
                      for i in range(passes)]
         scan_p = ctx.compute_pipeline("sort/radix_scan.wgsl", {"DIGITS": 1 << digit_bits,
                                                                 "GROUP_BLOCKS": self.group_blocks})
         return digit_bits, count_p, scan_p, scatter_p
 
     def sort(self, keys: np.ndarray, values: np.ndarray | None = None, bits: int = 32, base: int | None = None,
-             separate: bool = False, ranks: bool = False):
-        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values), and with
-        ``ranks`` each pair's sorted position by its input position too. ``separate``: through encode's
-        ``source`` instead of in place."""
+             separate: bool = False):
+        """Convenience: sort host arrays on the GPU (used by tests). Returns (keys, values).
+        ``separate``: through encode's ``source`` instead of in place."""
         ctx = self.ctx
         keys = np.ascontiguousarray(keys, np.uint32)
         n = keys.size
         values = np.arange(n, dtype=np.uint32) if values is None else np.ascontiguousarray(values, np.uint32)
         if n == 0:
-            return (keys.copy(), values.copy()) + ((np.zeros(0, np.uint32),) if ranks else ())
+            return keys.copy(), values.copy()
         kb = ctx.upload(keys, "keys")
         vb = ctx.upload(values, "values")
         info = ctx.upload(dispatch_info(n, SORT_BLOCK), "sort.info",
                           wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST)
         enc = ctx.device.create_command_encoder()
         based = (ctx.upload(np.array([base], np.uint32), "sort.base"), 0) if base is not None else None
-        rb = ctx.buffer(4 * n, "ranks") if ranks else None
         if separate:
             out_k, out_v = ctx.buffer(4 * n, "sorted_keys"), ctx.buffer(4 * n, "sorted_values")
-            self.encode(enc, info, out_k, out_v, n, bits, base=based, source=(kb, vb), ranks=rb)
+            self.encode(enc, info, out_k, out_v, n, bits, base=based, source=(kb, vb))
             kb, vb = out_k, out_v
         else:
-            self.encode(enc, info, kb, vb, n, bits, base=based, ranks=rb)
+            self.encode(enc, info, kb, vb, n, bits, base=based)
         ctx.submit(enc)
-        out = (ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n))
-        return out + ((ctx.read(rb, np.uint32, n),) if ranks else ())
+        return ctx.read(kb, np.uint32, n), ctx.read(vb, np.uint32, n)

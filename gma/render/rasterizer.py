@@ -59,14 +59,12 @@ class ProjectionState:
 @dataclass
 class RecordIndex:
     """Where a render's backward pass writes and finds per-intersection gradient records (see
-    store_record in tile_walk_bwd.wgsl): the tile-sorted keys, which carry each intersection's number
-    within its surfel's list, and each surfel's first emission index."""
+    tile_walk_bwd.wgsl): an intersection's record lies at its emission index, record_base[surfel] + its
+    number within its surfel's list, which its tile-sorted key carries; a surfel's records are
+    consecutive."""
 
     isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
     record_base: wgpu.GPUBuffer   # [N] by surfel id (written for listed surfels only)
-    # [isects] by emission index: each intersection's place in the tile-sorted list, where its record is.
-    # Written by a one-pass tile sort (RadixSorter.ranks_in_one_pass); else the backward's record_slots.wgsl.
-    slots: wgpu.GPUBuffer | None = None
 
 
 @dataclass
@@ -169,8 +167,7 @@ class SurfelRasterizer:
         tx, ty = tile_grid(camera.width, camera.height)
         largest = _record_bytes(num_isects, normal_depth=True)
         return (self.use_grad_records and self.raster_defines(channels)["USE_SUBGROUPS"]
-                and tx * ty <= 1 << RECORD_KEY_SHIFT and largest <= self.ctx.max_binding_bytes
-                and num_isects <= MAX_WORKGROUPS * 256)  # record_slots.wgsl: one thread per intersection
+                and tx * ty <= 1 << RECORD_KEY_SHIFT and largest <= self.ctx.max_binding_bytes)
 
     # -- passes -------------------------------------------------------------------------------------
     def _dispatch(self, encoder, pipeline, buffers, groups, name, timer):
@@ -278,8 +275,6 @@ class SurfelRasterizer:
             ranges = take(8 * tx * ty, "tile_ranges", STORAGE)
             if self._records_for(camera, surfels.channels, capacity):
                 records = RecordIndex(take(4 * cap, "isect_keys", STORAGE), take(4 * max(n, 1), "record_base", STORAGE))
-                if self.sorter.ranks_in_one_pass(_bits_for(tx * ty)):
-                    records.slots = take(4 * cap, "record_slots", STORAGE)
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
         defines = self.raster_defines(surfels.channels)
@@ -299,7 +294,7 @@ class SurfelRasterizer:
                 emit_resources[8] = st.block_bands
             self._dispatch(encoder, emit, emit_resources, ((n + 255) // 256, 1, 1), "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer,
-                               source=emitted, ranks=records.slots if records else None)
+                               source=emitted)
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
             self._dispatch(encoder, rng, [st.elem_info, isect_tiles, ranges, st.params],
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
@@ -387,7 +382,7 @@ class SurfelRasterizer:
             # ranges point, which this render wrote.
             kept = [*st.kept, isect_ids, ranges, *images, *replayed]
             if records:
-                kept += [b for b in (records.isect_keys, records.record_base, records.slots) if b is not None]
+                kept += [records.isect_keys, records.record_base]
             ctx.recycler.release_with(state, kept)
         return state
 
@@ -460,6 +455,7 @@ class SurfelRasterizer:
             v_colors = ctx.buffer(4 * c * n, "v_colors")
         if records:
             resources[12] = grads = self._cleared_records(enc, state.num_isects, normal_depth)
+            resources.update({16: records.isect_keys, 17: records.record_base})
         else:
             grads = ctx.buffer(4 * 16 * n, "v_proj")
             resources[12] = grads
@@ -476,8 +472,7 @@ class SurfelRasterizer:
         if colors_out:
             proj_resources[10] = v_colors
         if records:
-            slots = records.slots if records.slots is not None else self._record_slots(enc, state, timer)
-            proj_resources.update({11: records.record_base, 12: slots})
+            proj_resources[11] = records.record_base
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "NORMAL_DEPTH_GRADS": normal_depth, "COLORS_OUT": colors_out, "CHANNELS": c}
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
@@ -519,15 +514,6 @@ class SurfelRasterizer:
         enc.clear_buffer(records, 0, nbytes)
         self.ctx.submit(enc)
         self._zeroed_records = (records, nbytes)
-
-    def _record_slots(self, enc, state: ForwardState, timer) -> wgpu.GPUBuffer:
-        """Encode record_slots.wgsl: where each surfel's gradient records lie, by emission index."""
-        slots = self.workspace.get("record_slots", 4 * max(state.num_isects, 1))
-        rec = state.records
-        self._dispatch(enc, self.ctx.compute_pipeline("render/record_slots.wgsl"),
-                       [state.proj.params, rec.isect_keys, state.isect_ids, rec.record_base, slots],
-                       ((state.num_isects + 255) // 256, 1, 1), "record_slots", timer)
-        return slots
 
     def backward_defines(self, channels: int) -> dict:
         defines = self.raster_defines(channels)

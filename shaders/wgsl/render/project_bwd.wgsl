@@ -4,9 +4,9 @@
 // Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
 // the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
 // Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection (store_record in
-// tile_walk_bwd.wgsl); a surfel's are listed, in emission order, at slots[record_base ..
-// record_base + tile count) (record_slots.wgsl) and summed here in that order, the same on every run,
-// into the projection and colour gradients (NORMAL_DEPTH_GRADS says which record layout).
+// tile_walk_bwd.wgsl), at its emission index; a surfel's lie at [record_base, record_base + tile count)
+// and are summed here in that order, the same on every run, into the projection and colour gradients
+// (NORMAL_DEPTH_GRADS says which record layout).
 // COLORS_OUT: this pass writes v_colors (with COLOR_IN_PROJ or GRAD_RECORDS).
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
@@ -19,7 +19,6 @@
 #if GRAD_RECORDS
 @group(0) @binding(5) var<storage, read> records: array<vec4<f32>>;  // [isects, RECORD_VEC4S]
 @group(0) @binding(11) var<storage, read> record_base: array<u32>;   // [N] by surfel id
-@group(0) @binding(12) var<storage, read> slots: array<u32>;         // [isects] by emission index
 #else
 @group(0) @binding(5) var<storage, read> v_proj: array<f32>;       // [N, 16] (layout: grad_atomics.wgsl)
 #endif
@@ -65,7 +64,7 @@ fn raster_grads(i: u32) -> RasterGrads {
     var s3 = vec4<f32>(0.0);
     var s4 = vec4<f32>(0.0);
     for (var e = first; e < end; e++) {
-        let r = slots[e] * RECORD_VEC4S;
+        let r = e * RECORD_VEC4S;
         s0 += records[r];
         s1 += records[r + 1u];
         s2 += records[r + 2u];

@@ -198,18 +198,20 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 }
 
 #if GRAD_RECORDS
-// Gradient records: one per intersection, at its place in the tile-sorted list, RECORD_VEC2S vec2s
-// each, zeroed before the pass and summed per surfel by project_bwd.wgsl (record_slots.wgsl lists each
-// surfel's records). The tile walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each
-// record once, from the one subgroup that replays the tile. Hence only on lavapipe
-// (SurfelRasterizer.use_grad_records; GPUs keep per-surfel atomics). Against a float atomic per value (on
-// lavapipe a per-lane loop of locked compare-and-exchanges, about a third of this pass), when every
-// subgroup of the tile added its totals to the record with a read-modify-write: standard scene, 100k
-// surfels, same runs, this pass 92.6-94.3 against 115.0-117.0 ms, the sums +12 ms (record_slots 2.5,
-// project_bwd 15 against 5.6), the public call in one process, interleaved, forward 0.98x and backward
-// 0.96x. Records at the emission index instead, so that the sums read them in order, made that pass
-// ~12 ms slower (scattered read-modify-writes). The sums run in a fixed order, so the gradients are
-// the same on every run, also under load.
+// Gradient records: one per intersection, at its emission index (a surfel's records are consecutive),
+// RECORD_VEC2S vec2s each, zeroed before the pass and summed per surfel by project_bwd.wgsl. The tile
+// walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each record once, from the one
+// subgroup that replays the tile: only on lavapipe (SurfelRasterizer.use_grad_records; GPUs, whose
+// subgroups run concurrently, keep per-surfel atomics). History on the standard scene (100k surfels):
+// against a float atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about
+// a third of this pass), records that every subgroup of the tile updated with read-modify-writes at the
+// intersection's tile-sorted place made this pass 92.6-94.3 instead of 115.0-117.0 ms, the sums +12 ms
+// (a slot pass 2.5, project_bwd 15 against 5.6), the public forward 0.98x and backward 0.96x; records
+// at the emission index then made this pass ~12 ms slower (scattered read-modify-writes). Written once
+// per intersection by the tile walk, they go to the emission index: project_bwd reads each surfel's in
+// order and needs no slot list (standard scene, six alternating processes: project_bwd 0.88x by the
+// median, this pass within noise). The sums run in a fixed order, so the gradients are the same on
+// every run, also under load.
 @group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]
 
 #if NORMAL_DEPTH_GRADS

@@ -15,6 +15,12 @@
 // (benchmarks/shader_ab.py, 24 rounds): forward rasterize 0.935x, backward rasterize 0.925x, images
 // bit-identical.
 
+// Where an intersection's record goes: its emission index, record_base[surfel] + its number within its
+// surfel's list (above RECORD_KEY_SHIFT in its key), so that project_bwd.wgsl reads each surfel's records
+// one after another.
+@group(0) @binding(16) var<storage, read> isect_keys: array<u32>;   // tile-sorted keys
+@group(0) @binding(17) var<storage, read> record_base: array<u32>;  // [N] by surfel id
+
 struct BlockReplay {
     a: PixelReplay,
     b: PixelReplay,
@@ -125,8 +131,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
     for (var end = count; end > 0u; end -= min(end, SG)) {   // groups of SG, from the back
         let h0 = end - min(end, SG);
         let n = end - h0;
-        let mine_id = isect_ids[range.x + h0 + min(sg_lane, n - 1u)];
+        let mine_at = range.x + h0 + min(sg_lane, n - 1u);
+        let mine_id = isect_ids[mine_at];
         let mine_sid = mine_id & SURFEL_ID_MASK;
+        let mine_record = record_base[mine_sid] + (isect_keys[mine_at] >> RECORD_KEY_SHIFT);
         // Field by field, the normal and depth only when their gradients are wanted (see main).
         let mine_t0 = projected[mine_sid].t0;
         let mine_t1 = projected[mine_sid].t1;
@@ -163,7 +171,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
                 if (blocks & 64u) != 0u { replay_block(s, nd, col, idx, &r6, &t); }
                 if (blocks & 128u) != 0u { replay_block(s, nd, col, idx, &r7, &t); }
                 if t.any {   // else the record keeps its zeros
-                    store_record(range.x + idx, t, sg_lane);
+                    store_record(subgroupShuffle(mine_record, k), t, sg_lane);
                 }
             }
         }

@@ -14,11 +14,6 @@
 #if KEY_BASE
 @group(0) @binding(6) var<storage, read> key_base: array<u32>;
 #endif
-#if RANKS
-// Define RANKS (a sort of one pass, whose input order is the caller's): each pair's sorted position by
-// its input position (the renderer's gradient record slots, record_slots.wgsl, come for free this way).
-@group(0) @binding(7) var<storage, read_write> ranks: array<u32>;
-#endif
 
 var<workgroup> next: array<u32, RADIX + 1u>;
 
@@ -46,9 +41,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) l
         if i + lane < end {
             keys_out[first + peers.y] = key;
             vals_out[first + peers.y] = vals_in[idx];
-#if RANKS
-            ranks[idx] = first + peers.y;
-#endif
         }
     }
 }
