@@ -341,11 +341,16 @@ def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu
     before, after = _root_error(frames.poses, truth), _root_error(refined, truth)
     assert after[0] < 0.7 * before[0], (before, after)
     # the squared colour error (TEST_TIME_MSE) is part of the loss: without it the same steps end elsewhere,
-    # on this frame farther from the truth (measured: root 2.90 deg / 0.36 cm with it, 3.36 / 0.83 without)
+    # with a worse picture and farther from the true root position, while the root's rotation ends about
+    # as far either way. Measured on five perturbations of this frame (2026-12-01): PSNR +0.10 to +0.73 dB
+    # and root position 0.02-0.10 cm closer with the term, root rotation -0.27 to +0.10 deg; here 28.27
+    # against 27.59 dB, 0.46 against 0.51 cm, 3.27 against 3.17 deg. (Which way the rotation goes flips with
+    # the renderer's float summation order, through the fitted avatar: 2.90 against 3.36 deg before.)
     plain = PoseCorrections(anny_body, frames.poses, frames.indices, BONE_SETS["video"])
     fit_corrections(plain, decoded, anny_body, frames, 25, cfg, 0.5, gpu, mse=0.0)
     without = _root_error(plain.all_poses(), truth)
-    assert after[0] < without[0] and after[1] < without[1], (after, without)
+    assert score(refined)["psnr"] > score(plain.all_poses())["psnr"] + 0.3
+    assert after[1] < without[1] and after[0] < without[0] + 0.3, (after, without)
 
 
 @pytest.mark.slow

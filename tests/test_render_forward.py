@@ -107,6 +107,53 @@ def test_texture_path_matches_buffer_path(gpu):
     assert np.abs(rgba[..., 3:] - want.alpha.numpy()).max() <= 0.6 / 255 + 1e-6
 
 
+@pytest.mark.parametrize("case", ["deep", "saturated"])
+def test_tile_walk_matches_the_per_subgroup_variant_bit_for_bit(gpu, case):
+    """With 8-lane subgroups one subgroup composites a whole tile (tile_walk_fwd.wgsl); it blends the same
+    surfels in the same order and batches as the per-subgroup variant that other subgroup sizes run, so
+    images (buffer path, replayed or not, and the texture path) agree bit for bit: on tiles with more
+    intersections than a batch, and on tiles that saturate early."""
+    import wgpu
+
+    from gma.render import read_outputs
+
+    if not gpu.has_subgroups or gpu.subgroup_size != 8 or not SurfelRasterizer(gpu).use_subgroups:
+        pytest.skip("the tile walk needs the subgroup rasterizer with 8 lanes")
+    if case == "deep":
+        scene = torch_scene(2500, seed=4, scale_range=(0.05, 0.3), spread=0.4)
+        scene["opacities"] = torch.full((2500,), 0.02)
+    else:
+        scene = torch_scene(3000, seed=11, scale_range=(0.3, 0.6), spread=2.5, depth=5.0)
+        scene["opacities"] = torch.full((3000,), 0.99)
+    cam = default_camera(56, 40)
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in
+                                               ("means", "quats", "scales", "opacities", "colors")))
+    bg = gpu.upload(np.array([0.2, 0.4, 0.6], np.float32), "bg")
+    results = []
+    for walk in (False, True):
+        rast = SurfelRasterizer(gpu)
+        rast.use_tile_walk = walk
+        assert rast.raster_defines(3)["TILE_WALK"] == walk
+        images = [read_outputs(gpu, rast.forward(buffers, cam, replay=replay)) for replay in (True, False)]
+        texture = gpu.device.create_texture(
+            size=(cam.width, cam.height, 1), format=wgpu.TextureFormat.rgba8unorm,
+            usage=wgpu.TextureUsage.STORAGE_BINDING | wgpu.TextureUsage.COPY_SRC)
+        rast.render_to_texture(buffers, cam, texture.create_view(), bg)
+        raw = gpu.device.queue.read_texture({"texture": texture}, {"bytes_per_row": 4 * cam.width,
+                                                                    "rows_per_image": cam.height},
+                                            (cam.width, cam.height, 1))
+        results.append((images, bytes(raw)))
+    if case == "deep":
+        state = SurfelRasterizer(gpu).forward(buffers, cam)
+        ranges = gpu.read(state.tile_ranges, np.uint32, 2 * 4 * 3).reshape(-1, 2)
+        assert int((ranges[:, 1] - ranges[:, 0]).max()) > 256, "some tile should hold more than a batch"
+    (per_subgroup, tex_a), (walked, tex_b) = results
+    for a, b in zip(per_subgroup, walked):
+        for name in ("color", "alpha", "normal", "depth"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert tex_a == tex_b
+
+
 def test_plain_and_subgroup_variants_agree(gpu):
     """The subgroup path (CPU adapters) and the plain path (GPUs) give the same image."""
     scene = torch_scene(1500, seed=2)

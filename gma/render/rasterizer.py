@@ -137,6 +137,10 @@ class SurfelRasterizer:
         # store_record in tile_walk_bwd.wgsl for why this is safe there only). Tests switch it off to
         # exercise the atomics.
         self.use_grad_records = self.use_subgroups and ctx.is_lavapipe and ctx.subgroup_size == 8
+        # With 8-lane subgroups one subgroup composites (and, with records, replays) a whole tile
+        # (tile_walk_fwd.wgsl); tests switch it off to exercise the per-subgroup variant that other
+        # subgroup sizes run. Gradient records need it.
+        self.use_tile_walk = True
         self._zeroed_records: tuple[wgpu.GPUBuffer, int] | None = None  # see _cleared_records
         self.last_timings: dict[str, float] = {}
 
@@ -158,15 +162,16 @@ class SurfelRasterizer:
         defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1, "TILE_WALK": False}
         if sg:
             # 8 lanes (lavapipe): one subgroup composites a whole tile (tile_walk_fwd.wgsl).
-            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=sg == 8)
+            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=sg == 8 and self.use_tile_walk)
         return defines
 
     def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
         """Whether a replayed render keeps the index for gradient records: the lavapipe subgroup
-        variant, tile ids that fit below RECORD_KEY_SHIFT, and records that fit one buffer binding."""
+        variant's tile walk, tile ids that fit below RECORD_KEY_SHIFT, and records that fit one buffer
+        binding."""
         tx, ty = tile_grid(camera.width, camera.height)
         largest = _record_bytes(num_isects, normal_depth=True)
-        return (self.use_grad_records and self.raster_defines(channels)["USE_SUBGROUPS"]
+        return (self.use_grad_records and self.raster_defines(channels)["TILE_WALK"]
                 and tx * ty <= 1 << RECORD_KEY_SHIFT and largest <= self.ctx.max_binding_bytes)
 
     # -- passes -------------------------------------------------------------------------------------

@@ -417,20 +417,39 @@ fn end_batch(b: ptr<function, PixelBlend>) {
     (*b).result.transmittance = abs(st.T);
 }
 
+// What the forward blends of hit k of the subgroup's current group of SG (lane k holds it: `mine`, its
+// colour `mine_col`), passed to every lane.
+struct ShuffledHit {
+    s: ProjectedSurfel,   // normal_depth left zero: see normal and depth
+    normal: vec3<f32>,
+    depth: f32,           // 0 with DEPTH_IN_COLOR (the depth rides in col.w)
+    col: vec4<f32>,
+}
+
+fn shuffle_hit(mine: ProjectedSurfel, mine_col: vec4<f32>, k: u32) -> ShuffledHit {
+    var h: ShuffledHit;
+    h.s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
+                          subgroupShuffle(mine.t2, k), vec4<f32>(0.0));
+    h.normal = subgroupShuffle(mine.normal_depth.xyz, k);
+    h.depth = 0.0;
+    if !DEPTH_IN_COLOR {   // constant
+        h.depth = subgroupShuffle(mine.normal_depth.w, k);
+    }
+    h.col = subgroupShuffle(mine_col, k);
+    return h;
+}
+
 // Blend hit k of the subgroup's current group of SG (lane k holds it) into the four pixels' states;
 // `valid` false (a step's second hit past the group's end) caps alpha at 0, below ALPHA_THRESHOLD, which
 // changes nothing (lane k still holds a real surfel, so nothing reads past the group).
 fn blend_hit(k: u32, valid: bool, mine: ProjectedSurfel, mine_col: vec4<f32>, mine_slot: u32, index_base: u32,
              px: vec2<f32>, a: ptr<function, BlendState>, b: ptr<function, BlendState>,
              c: ptr<function, BlendState>, d: ptr<function, BlendState>) {
-    let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                            subgroupShuffle(mine.t2, k), vec4<f32>(0.0));
-    let normal = subgroupShuffle(mine.normal_depth.xyz, k);
-    var depth = 0.0;
-    if !DEPTH_IN_COLOR {   // constant
-        depth = subgroupShuffle(mine.normal_depth.w, k);
-    }
-    let col = subgroupShuffle(mine_col, k);
+    let hit = shuffle_hit(mine, mine_col, k);
+    let s = hit.s;
+    let normal = hit.normal;
+    let depth = hit.depth;
+    let col = hit.col;
     let index = index_base + subgroupShuffle(mine_slot, k);
     let ca = column_alpha(s, px);
     let cap = select(0.0, MAX_ALPHA, valid);

@@ -34,17 +34,16 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
 
 // The states are copied into values of this call and back, as in composite_quad's steps (lavapipe writes
 // a variable that a loop carries through the loop's lane mask).
-fn blend_block(s: ProjectedSurfel, normal: vec3<f32>, depth: f32, col: vec4<f32>, index: u32,
-               r: ptr<function, BlockBlend>) {
+fn blend_block(h: ShuffledHit, index: u32, r: ptr<function, BlockBlend>) {
     var sa = (*r).a.state;
     var sb = (*r).b.state;
     var sc = (*r).c.state;
     var sd = (*r).d.state;
-    let ca = column_alpha(s, (*r).a.px);
-    blend_select(min(MAX_ALPHA, quad_alpha(s, ca, 0u).raw), normal, depth, col, index, &sa);
-    blend_select(min(MAX_ALPHA, quad_alpha(s, ca, 1u).raw), normal, depth, col, index, &sb);
-    blend_select(min(MAX_ALPHA, quad_alpha(s, ca, 2u).raw), normal, depth, col, index, &sc);
-    blend_select(min(MAX_ALPHA, quad_alpha(s, ca, 3u).raw), normal, depth, col, index, &sd);
+    let ca = column_alpha(h.s, (*r).a.px);
+    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 0u).raw), h.normal, h.depth, h.col, index, &sa);
+    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 1u).raw), h.normal, h.depth, h.col, index, &sb);
+    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 2u).raw), h.normal, h.depth, h.col, index, &sc);
+    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 3u).raw), h.normal, h.depth, h.col, index, &sd);
     (*r).a.state = sa;
     (*r).b.state = sb;
     (*r).c.state = sc;
@@ -103,23 +102,16 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
                 // Lane 0's copy of the shuffled id: uniform, so the branches below are jumps.
                 let blocks = (subgroupBroadcast(subgroupShuffle(mine_id, k), 0u) >> SURFEL_ID_BITS) & open;
                 if blocks != 0u {
-                    let s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                                            subgroupShuffle(mine.t2, k), vec4<f32>(0.0));
-                    let normal = subgroupShuffle(mine.normal_depth.xyz, k);
-                    var depth = 0.0;
-                    if !DEPTH_IN_COLOR {   // constant
-                        depth = subgroupShuffle(mine.normal_depth.w, k);
-                    }
-                    let col = subgroupShuffle(mine_col, k);
+                    let hit = shuffle_hit(mine, mine_col, k);
                     let index = base + h + k + 1u - range.x;   // one past its local index (`last`)
-                    if (blocks & 1u) != 0u { blend_block(s, normal, depth, col, index, &r0); }
-                    if (blocks & 2u) != 0u { blend_block(s, normal, depth, col, index, &r1); }
-                    if (blocks & 4u) != 0u { blend_block(s, normal, depth, col, index, &r2); }
-                    if (blocks & 8u) != 0u { blend_block(s, normal, depth, col, index, &r3); }
-                    if (blocks & 16u) != 0u { blend_block(s, normal, depth, col, index, &r4); }
-                    if (blocks & 32u) != 0u { blend_block(s, normal, depth, col, index, &r5); }
-                    if (blocks & 64u) != 0u { blend_block(s, normal, depth, col, index, &r6); }
-                    if (blocks & 128u) != 0u { blend_block(s, normal, depth, col, index, &r7); }
+                    if (blocks & 1u) != 0u { blend_block(hit, index, &r0); }
+                    if (blocks & 2u) != 0u { blend_block(hit, index, &r1); }
+                    if (blocks & 4u) != 0u { blend_block(hit, index, &r2); }
+                    if (blocks & 8u) != 0u { blend_block(hit, index, &r3); }
+                    if (blocks & 16u) != 0u { blend_block(hit, index, &r4); }
+                    if (blocks & 32u) != 0u { blend_block(hit, index, &r5); }
+                    if (blocks & 64u) != 0u { blend_block(hit, index, &r6); }
+                    if (blocks & 128u) != 0u { blend_block(hit, index, &r7); }
                 }
             }
         }
