@@ -438,10 +438,10 @@ class SurfelRasterizer:
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
-        # The backward's tile walk writes gradient records (tile_walk_bwd.wgsl); with atomics each
-        # subgroup replays its own block.
+        # With records the backward's entry point is the tile walk (tile_walk_bwd.wgsl, the only writer of
+        # records); with atomics each subgroup replays its own block.
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
-                       GRAD_RECORDS=records is not None, TILE_WALK=defines["TILE_WALK"] and records is not None)
+                       GRAD_RECORDS=records is not None)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,

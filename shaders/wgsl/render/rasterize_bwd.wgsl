@@ -6,8 +6,8 @@
 // ALPHA_GRADS (false when no loss reads the alpha image: its upstream is then zero, its terms dropped),
 // NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
 // are then zero and neither summed nor scattered; the buffer entries stay zero), and GRAD_RECORDS
-// (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics, see below), and
-// TILE_WALK (with GRAD_RECORDS: one subgroup per tile, tile_walk_bwd.wgsl).
+// (lavapipe, SG = 8: per-intersection gradient records instead of per-surfel atomics, see below; the tile
+// walk of tile_walk_bwd.wgsl, one subgroup per tile, writes them, so it is this variant's entry point).
 #include "render/rasterize_core.wgsl"
 #include "render/grad_atomics.wgsl"
 
@@ -341,7 +341,7 @@ fn value_slot(j: u32) -> u32 {
     return select(select(3u * v + (j & 3u), w_slot, (j & 3u) == 3u), j, j >= 12u);
 }
 
-#if TILE_WALK
+#if GRAD_RECORDS
 #include "render/tile_walk_bwd.wgsl"
 #else
 @compute @workgroup_size(64)   // RASTER_THREADS

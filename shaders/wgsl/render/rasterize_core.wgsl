@@ -294,10 +294,10 @@ fn tile_pixel_quad(lid: u32) -> vec2<u32> {
     return vec2<u32>(((lid >> 1u) & 12u) | (lid & 3u), ((lid >> 2u) & 8u) | ((lid >> 2u) & 1u));
 }
 
-// First pixel (global) of lane `sg_lane` in 4x8 block `g` of the tile at `origin`: the pixel that
-// tile_pixel_quad gives thread 8 g + sg_lane (block g = bit g of tile_block_bits: column g & 3, band g >> 2).
+// First pixel (global) of lane `sg_lane` in 4x8 block `g` of the tile at `origin` (block g = bit g of
+// tile_block_bits: column g & 3, band g >> 2): that of thread 8 g + sg_lane, subgroup g's lane sg_lane.
 fn block_first_pixel(origin: vec2<u32>, g: u32, sg_lane: u32) -> vec2<u32> {
-    return origin + vec2<u32>(4u * (g & 3u) + (sg_lane & 3u), 8u * (g >> 2u) + ((sg_lane >> 2u) & 1u));
+    return origin + tile_pixel_quad(8u * g + sg_lane);
 }
 
 // Blocks of the tile (see block_bit) that the pixels of a thread whose first pixel is `p` lie in.
@@ -439,24 +439,25 @@ fn shuffle_hit(mine: ProjectedSurfel, mine_col: vec4<f32>, k: u32) -> ShuffledHi
     return h;
 }
 
+// Blend `h` (local index + 1 `index`) into the four pixels' states of a thread whose first pixel is at
+// `px`, alpha capped at `cap`. Both subgroup forwards (composite_quad, tile_walk_fwd.wgsl) blend through it.
+fn blend_quad(h: ShuffledHit, index: u32, px: vec2<f32>, cap: f32, a: ptr<function, BlendState>,
+              b: ptr<function, BlendState>, c: ptr<function, BlendState>, d: ptr<function, BlendState>) {
+    let ca = column_alpha(h.s, px);
+    blend_select(min(cap, quad_alpha(h.s, ca, 0u).raw), h.normal, h.depth, h.col, index, a);
+    blend_select(min(cap, quad_alpha(h.s, ca, 1u).raw), h.normal, h.depth, h.col, index, b);
+    blend_select(min(cap, quad_alpha(h.s, ca, 2u).raw), h.normal, h.depth, h.col, index, c);
+    blend_select(min(cap, quad_alpha(h.s, ca, 3u).raw), h.normal, h.depth, h.col, index, d);
+}
+
 // Blend hit k of the subgroup's current group of SG (lane k holds it) into the four pixels' states;
 // `valid` false (a step's second hit past the group's end) caps alpha at 0, below ALPHA_THRESHOLD, which
 // changes nothing (lane k still holds a real surfel, so nothing reads past the group).
 fn blend_hit(k: u32, valid: bool, mine: ProjectedSurfel, mine_col: vec4<f32>, mine_slot: u32, index_base: u32,
              px: vec2<f32>, a: ptr<function, BlendState>, b: ptr<function, BlendState>,
              c: ptr<function, BlendState>, d: ptr<function, BlendState>) {
-    let hit = shuffle_hit(mine, mine_col, k);
-    let s = hit.s;
-    let normal = hit.normal;
-    let depth = hit.depth;
-    let col = hit.col;
-    let index = index_base + subgroupShuffle(mine_slot, k);
-    let ca = column_alpha(s, px);
-    let cap = select(0.0, MAX_ALPHA, valid);
-    blend_select(min(cap, quad_alpha(s, ca, 0u).raw), normal, depth, col, index, a);
-    blend_select(min(cap, quad_alpha(s, ca, 1u).raw), normal, depth, col, index, b);
-    blend_select(min(cap, quad_alpha(s, ca, 2u).raw), normal, depth, col, index, c);
-    blend_select(min(cap, quad_alpha(s, ca, 3u).raw), normal, depth, col, index, d);
+    blend_quad(shuffle_hit(mine, mine_col, k), index_base + subgroupShuffle(mine_slot, k), px,
+               select(0.0, MAX_ALPHA, valid), a, b, c, d);
 }
 
 // composite_pixel for the four pixels of thread `lid` (first pixel `pix`, global), into *a .. *d.

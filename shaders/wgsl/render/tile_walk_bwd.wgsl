@@ -1,6 +1,7 @@
-// The backward rasterizer's entry point for 8-lane CPU drivers with gradient records (TILE_WALK and
-// GRAD_RECORDS: lavapipe): one subgroup replays the whole 16x16 tile, as tile_walk_fwd.wgsl composites
-// it. Included by rasterize_bwd.wgsl, whose replay arithmetic (replay_hit, quad_alpha) it uses.
+// The backward rasterizer's entry point for 8-lane CPU drivers with gradient records (GRAD_RECORDS,
+// which needs the forward's TILE_WALK: lavapipe): one subgroup replays the whole 16x16 tile, as
+// tile_walk_fwd.wgsl composites it. Included by rasterize_bwd.wgsl, whose replay arithmetic (replay_hit,
+// quad_alpha) it uses.
 //
 // It walks the tile's list once, back to front, reads each intersection's surfel once (one per lane,
 // 8 at a time, passed around by shuffles), and replays it in every block of the tile that its block bits
@@ -8,8 +9,9 @@
 // replay states (BlockReplay) in its registers and stack. The surfel's gradient is summed over the
 // lane's pixels of all those blocks, then over the lanes (reduce-scatter), and written to its record
 // once, with plain stores: no other subgroup writes it. The per-subgroup variant (main in
-// rasterize_bwd.wgsl) flushed it once per block it reached, each a read-modify-write of the record
-// (2.46 blocks per intersection on the standard scene), and every subgroup scanned the whole tile list.
+// rasterize_bwd.wgsl, now with atomics only) had flushed it once per block it reached, each a
+// read-modify-write of the record (2.46 blocks per intersection on the standard scene), and every
+// subgroup scanned the whole tile list.
 // The gradients' sums run in another order than there (within float rounding; the same on every run).
 // Standard scene, 100k surfels, lavapipe (Mesa 25.0.7, 2-core AMD EPYC), both variants in one process
 // (benchmarks/shader_ab.py, 24 rounds): forward rasterize 0.935x, backward rasterize 0.925x, images

@@ -1,6 +1,6 @@
 // The forward rasterizers' entry point for 8-lane CPU drivers (TILE_WALK: lavapipe): one subgroup
 // composites the whole 16x16 tile. Included by rasterize_entry.wgsl; composite_quad's per-pixel
-// arithmetic (blend_select, quad_alpha), its batches and so its images, bit for bit.
+// arithmetic (blend_quad), its batches and so its images, bit for bit.
 //
 // The per-subgroup variant (composite_quad) gives each of a tile's 8 subgroups one 4x8 block: each
 // subgroup lists, from the whole tile list, the intersections whose block bits meet its block, and reads
@@ -39,11 +39,7 @@ fn blend_block(h: ShuffledHit, index: u32, r: ptr<function, BlockBlend>) {
     var sb = (*r).b.state;
     var sc = (*r).c.state;
     var sd = (*r).d.state;
-    let ca = column_alpha(h.s, (*r).a.px);
-    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 0u).raw), h.normal, h.depth, h.col, index, &sa);
-    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 1u).raw), h.normal, h.depth, h.col, index, &sb);
-    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 2u).raw), h.normal, h.depth, h.col, index, &sc);
-    blend_select(min(MAX_ALPHA, quad_alpha(h.s, ca, 3u).raw), h.normal, h.depth, h.col, index, &sd);
+    blend_quad(h, index, (*r).a.px, MAX_ALPHA, &sa, &sb, &sc, &sd);
     (*r).a.state = sa;
     (*r).b.state = sb;
     (*r).c.state = sc;
