@@ -44,6 +44,7 @@ class ProjectionState:
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
     block_bands: wgpu.GPUBuffer   # [N] vec2<u32>: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
     colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded (depth in w below 4 channels)
+    pixel_rows: wgpu.GPUBuffer | None  # [N] u32: the box's first | last pixel row << 16 (the forward's tile walk)
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
     depth_order: wgpu.GPUBuffer   # [N] surfel ids, front to back
@@ -186,12 +187,14 @@ class SurfelRasterizer:
         cp.end()
 
     @staticmethod
-    def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer) -> None:
+    def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer, pixel_rows: wgpu.GPUBuffer | None = None) -> None:
         """The subgroup rasterizers (forward and backward) read the colours padded to a vec4 that
         projection wrote (see rasterize_core.wgsl) instead of the colours at binding 2, which they do not
-        declare."""
+        declare; the forward's tile walk also reads the surfels' pixel rows."""
         del resources[2]
         resources[15] = colors4
+        if pixel_rows is not None:
+            resources[18] = pixel_rows
 
     def project(self, encoder, surfels: SurfelBuffers, camera: Camera, capacity: int,
                 timer: PassTimer | None = None, keep: bool = True) -> ProjectionState:
@@ -207,6 +210,7 @@ class SurfelRasterizer:
                                surfels.channels)
         scratch = self.workspace.get
         taken: list[wgpu.GPUBuffer] = []
+        tile_walk = self.raster_defines(surfels.channels)["TILE_WALK"]
 
         def kept(label, nbytes, usage=STORAGE):
             if not keep:
@@ -220,6 +224,7 @@ class SurfelRasterizer:
             tile_rects=scratch("tile_rects", 16 * n),
             block_bands=scratch("block_bands", 8 * n),
             colors4=kept("colors4", 16 * n),
+            pixel_rows=scratch("pixel_rows", 4 * n) if tile_walk else None,
             tile_counts=kept("tile_counts", 4 * n),
             depth_keys=scratch("depth_keys", 4 * n),
             depth_order=scratch("depth_order", 4 * n),
@@ -233,11 +238,14 @@ class SurfelRasterizer:
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
-        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups})
-        self._dispatch(encoder, p, [st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
+        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups,
+                                                             "PIXEL_ROWS": tile_walk})
+        resources = dict(enumerate([st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
-                                    st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats],
-                       ((n + 255) // 256, 1, 1), "project", timer)
+                                    st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats]))
+        if tile_walk:
+            resources[14] = st.pixel_rows
+        self._dispatch(encoder, p, resources, ((n + 255) // 256, 1, 1), "project", timer)
         return st
 
     def depth_order(self, encoder, st: ProjectionState, n: int, key_bits: int = DEPTH_KEY_BITS,
@@ -313,7 +321,8 @@ class SurfelRasterizer:
             raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay})
             resources = dict(enumerate(inputs + list(target)))
         if subgroups:
-            self._subgroup_inputs(resources, st.colors4 if n else empty)
+            self._subgroup_inputs(resources, st.colors4 if n else empty,
+                                  (st.pixel_rows if n else empty) if defines["TILE_WALK"] else None)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges, records
 

@@ -40,3 +40,26 @@ fn tile_block_bits(w: vec2<u32>, tile: u32, tile_grid_x: u32) -> u32 {
 fn expand_block_bits(b: u32) -> u32 {
     return ((b & 15u) | ((b & 0xf0u) << 12u)) * 0x1111u;
 }
+
+// The forward tile walk's quads (tile_walk_fwd.wgsl): the tile's 4x2-pixel quads, bit 16 band + 4 column + k for
+// the quad in rows 2 k, 2 k + 1 of its 8-row band `band` and 4-pixel column `column`, so that block g
+// (bit g of tile_block_bits, g = 4 band + column) owns bits 4 g .. 4 g + 3 and a walking lane's pixel k
+// of the block bit 4 g + k. Those of the blocks in `blocks` (tile_block_bits) whose rows lie within the
+// surfel's box rows `rows` (first | last << 16, pixel_rows in project_fwd.wgsl) in the tile whose top
+// row is `top`: in the others the surfel has alpha < 1/255 at every pixel.
+fn tile_quads(rows: u32, top: u32, blocks: u32) -> u32 {
+    let first = (clamp(rows & 0xffffu, top, top + 15u) - top) >> 1u;   // row pairs of the tile, 0-7
+    let last = (clamp(rows >> 16u, top, top + 15u) - top) >> 1u;
+    let pairs = ((2u << last) - 1u) & ~((1u << first) - 1u);
+    // Band 0's pairs (bits 0-3) into each of its four blocks' nibbles, band 1's (bits 4-7) likewise.
+    return (((pairs & 15u) | ((pairs & 0xf0u) << 12u)) * 0x1111u) & block_nibbles(blocks);
+}
+
+// Block bits (bit g: block g) to their quads' nibbles (bits 4 g .. 4 g + 3, see tile_quads).
+fn block_nibbles(blocks: u32) -> u32 {
+    var x = blocks & 0xffu;
+    x = (x | (x << 12u)) & 0x000f000fu;
+    x = (x | (x << 6u)) & 0x03030303u;
+    x = (x | (x << 3u)) & 0x11111111u;
+    return x * 15u;
+}

@@ -23,6 +23,11 @@
 @group(0) @binding(10) var<storage, read_write> block_bands: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
+#if PIXEL_ROWS
+// For the forward tile walk (tile_walk_fwd.wgsl, TILE_WALK): the first and last pixel row of the surfel's box
+// (first | last << 16), from which it skips the rows of a block that the surfel cannot reach.
+@group(0) @binding(14) var<storage, read_write> pixel_rows: array<u32>;           // [N]
+#endif
 // [4], set to (0, 0, ~0, 0) before this pass: [1] the intersections wanted (the sum of tile_counts),
 // [2] the smallest and [3] the largest depth key of the surfels listed in some tile (tile count > 0);
 // [0] is isect_setup.wgsl's. The host reads them to size the intersection buffers and to choose how
@@ -175,6 +180,9 @@ fn project_surfel(i: u32) -> vec2<u32> {
 
     projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
                                    vec4<f32>(normal, mu_c.z));
+#if PIXEL_ROWS
+    pixel_rows[i] = px_lo.y | (px_hi.y << 16u);
+#endif
     let bands = write_bands(i, block_shape(t0, t1, t2, mu2d, r2u, disc), mu2d, p_lo, p_hi, px_lo, px_hi);
     let tiles = tile_list(bands, tile_lo, tile_hi);
     tile_rects[i] = tiles;

@@ -17,6 +17,9 @@
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR)
+#if TILE_WALK
+@group(0) @binding(18) var<storage, read> pixel_rows: array<u32>;              // [N] see tile_quads
+#endif
 // Per subgroup (row sg_id * (BATCH + SG)): the batch's intersections whose block mask meets the
 // subgroup's blocks, each as its surfel id << 8 | its slot in the batch (hit_entry), then up to SG - 1
 // entries of scratch (see list_hits). Only the subgroup's own lanes
@@ -439,15 +442,21 @@ fn shuffle_hit(mine: ProjectedSurfel, mine_col: vec4<f32>, k: u32) -> ShuffledHi
     return h;
 }
 
-// Blend `h` (local index + 1 `index`) into the four pixels' states of a thread whose first pixel is at
-// `px`, alpha capped at `cap`. Both subgroup forwards (composite_quad, tile_walk_fwd.wgsl) blend through it.
+// Blend `h` (local index + 1 `index`) into the state `st` of a thread's pixel k (quad_alpha; `ca` its
+// column's terms), alpha capped at `cap`. Both subgroup forwards (composite_quad, tile_walk_fwd.wgsl)
+// blend through it.
+fn blend_pixel(h: ShuffledHit, ca: ColumnAlpha, k: u32, index: u32, cap: f32, st: ptr<function, BlendState>) {
+    blend_select(min(cap, quad_alpha(h.s, ca, k).raw), h.normal, h.depth, h.col, index, st);
+}
+
+// blend_pixel for the four pixels of a thread whose first pixel is at `px`.
 fn blend_quad(h: ShuffledHit, index: u32, px: vec2<f32>, cap: f32, a: ptr<function, BlendState>,
               b: ptr<function, BlendState>, c: ptr<function, BlendState>, d: ptr<function, BlendState>) {
     let ca = column_alpha(h.s, px);
-    blend_select(min(cap, quad_alpha(h.s, ca, 0u).raw), h.normal, h.depth, h.col, index, a);
-    blend_select(min(cap, quad_alpha(h.s, ca, 1u).raw), h.normal, h.depth, h.col, index, b);
-    blend_select(min(cap, quad_alpha(h.s, ca, 2u).raw), h.normal, h.depth, h.col, index, c);
-    blend_select(min(cap, quad_alpha(h.s, ca, 3u).raw), h.normal, h.depth, h.col, index, d);
+    blend_pixel(h, ca, 0u, index, cap, a);
+    blend_pixel(h, ca, 1u, index, cap, b);
+    blend_pixel(h, ca, 2u, index, cap, c);
+    blend_pixel(h, ca, 3u, index, cap, d);
 }
 
 // Blend hit k of the subgroup's current group of SG (lane k holds it) into the four pixels' states;
