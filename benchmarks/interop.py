@@ -1,9 +1,10 @@
 """Figures for issue 14 (interop): export time and sizes, splat round-trip PSNR, retargeting angle errors.
 
-    python3 benchmarks/interop.py [avatar.gma] [--size 256] [--quick]
+    python3 benchmarks/interop.py [avatar.gma] [--size 256] [--quick] [--out DIR]
 
 Without an avatar, a fresh default-config avatar with randomised decoders stands in (varied colours and
-scales). Prints one line per figure.
+scales). Prints one line per figure. The exported files and renders go to a temporary directory that is
+removed at the end, or are kept in ``--out DIR`` (a new or empty directory).
 """
 
 from __future__ import annotations
@@ -75,9 +76,24 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true",
                     help="one splat and one mesh export, one round trip (each is a whole command: ~7 s on a 2-core "
                          "machine; the test suite's smoke run)")
+    ap.add_argument("--out", help="keep the exports and renders in this directory (new or empty)")
     args = ap.parse_args()
     if args.avatar is not None and not Path(args.avatar).is_file():
         ap.error(f"{args.avatar}: avatar file not found")
+    if args.out is None:
+        with tempfile.TemporaryDirectory(prefix="gma-interop-") as tmp:
+            report(args, Path(tmp))
+        return
+    out = Path(args.out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        ap.error(f"{out}: exists and is not an empty directory (nothing there is overwritten)")
+    out.mkdir(parents=True, exist_ok=True)
+    report(args, out)
+    print(f"outputs in {out}")
+
+
+def report(args, tmp: Path) -> None:
+    """Every figure, with the intermediate files in ``tmp``."""
     from gma.avatar import Avatar, AvatarConfig
     from gma.avatar.gpu import AvatarRenderer
     from gma.body import load_body
@@ -88,7 +104,6 @@ def main() -> None:
     from gma.render.image_io import save_png
 
     body = load_body("anny")
-    tmp = Path(tempfile.mkdtemp(prefix="gma-interop-"))
     path = args.avatar
     if path is None:
         av = Avatar.create(AvatarConfig(), body, seed=1)
@@ -142,7 +157,6 @@ def main() -> None:
     for label, m in [("test BVH", load_motion_file(tmp / "m.bvh", body)),
                      ("built-in walk", walk)] + [(f, load_motion_file(f, body)) for f in args.motion]:
         print(f"{label}: {foot_report(body, m)}")
-    print(f"outputs in {tmp}")
 
 
 if __name__ == "__main__":
