@@ -7,10 +7,11 @@ GPU pass times are compared directly. Prints per pass the medians and the median
 B / A, and the images' and gradients' sums (equal sums: the change kept them, very likely bit for bit).
 
     cp -r shaders/wgsl /tmp/a && cp -r shaders/wgsl /tmp/b   # then edit /tmp/b
-    python benchmarks/shader_ab.py /tmp/a /tmp/b [--rounds 16] [--count 100000]
+    python benchmarks/shader_ab.py /tmp/a /tmp/b [--rounds 16] [--count 100000] [--scene avatar] [--size 512]
 
 Only the shaders differ: the Python side is this checkout's. Without ../shared's standard scene it renders
-a random scene of --count surfels.
+a random scene of --count surfels. ``--scene avatar`` renders avatar-like surfels instead (small, tangent to
+a body-shaped surface; gma.render.scenes) at --size pixels square.
 """
 
 from __future__ import annotations
@@ -33,7 +34,11 @@ MAX_SURFELS = MAX_WORKGROUPS * 256
 PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "project_bwd")
 
 
-def scene_and_camera(count: int):
+def scene_and_camera(count: int, kind: str = "standard", size: int = 512):
+    if kind == "avatar":
+        from gma.render.scenes import avatar_camera, avatar_like_scene
+
+        return avatar_like_scene(count), avatar_camera(size, size)
     module = load_standard_workload()
     if module is not None:
         return workload_surfels(module, count)
@@ -49,7 +54,9 @@ def main() -> int:
     p.add_argument("a", help="shader directory A (like shaders/wgsl)")
     p.add_argument("b", help="shader directory B")
     p.add_argument("--rounds", type=int, default=16)
-    p.add_argument("--count", type=int, default=100000, help="surfels of the standard scene")
+    p.add_argument("--count", type=int, default=100000, help="surfels of the scene")
+    p.add_argument("--scene", choices=("standard", "avatar"), default="standard")
+    p.add_argument("--size", type=int, default=512, help="image side of the avatar scene")
     args = p.parse_args()
     if args.rounds < 1:
         print(f"--rounds {args.rounds}: needs at least 1", file=sys.stderr)
@@ -64,7 +71,10 @@ def main() -> int:
             return 2
     ctx = get_context()
     print(f"adapter: {ctx.name}; {machine()}")
-    scene, cam = scene_and_camera(args.count)
+    if not 16 <= args.size <= 4096:
+        print(f"--size {args.size}: must lie in 16..4096", file=sys.stderr)
+        return 2
+    scene, cam = scene_and_camera(args.count, args.scene, args.size)
     surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
                                         scene["colors"])
     upstream = np.random.default_rng(0).normal(size=(cam.height, cam.width, scene["colors"].shape[1]))
