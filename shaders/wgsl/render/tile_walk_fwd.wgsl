@@ -17,7 +17,8 @@
 // the rows of the surfel's pixel box (pixel_rows, written by projection; tile_quads in block_bits.wgsl),
 // where its alpha is below 1/255 and blending changes nothing: 33 % of the block pixels the walk would
 // evaluate on the standard scene (2.32M -> 1.55M in the tile lists), images bit-identical. Standard
-// scene, shader_ab.py, both in one process: this pass 0.950x (18 rounds) and 0.944x, 0.964x (8 each).
+// scene, shader_ab.py, both in one process, 12 rounds: this pass 0.933x; avatar-like surfels
+// (--scene avatar, 50k, 512 px) 0.927x.
 // The backward's replay took the same skips and was slower (1.03x-1.10x in four variants: the branches
 // split its per-pixel accumulations), and exact 4x2 quads from the surfel's ellipse (43 % skipped)
 // cost more to compute per hit than they saved (+10 % for the shape alone); neither was kept.
@@ -44,8 +45,8 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
 // Blend `h` into block *r's pixels among `quads` (a lane's pixel k in bit k; subgroup-uniform, so the
 // branches are jumps): those in the rows of the surfel's box (tile_quads). Each pixel's state is copied
 // into a value of its branch and back, as in composite_quad's steps (lavapipe writes a variable that a
-// loop carries through the loop's lane mask); copying all four before the branches made the pass
-// 0.975x of the unskipped one instead of 0.944x (standard scene, shader_ab.py, 8 rounds each).
+// loop carries through the loop's lane mask); copying all four around the branches paid a third of
+// what this does (standard scene, shader_ab.py, 8 rounds each).
 fn blend_block(h: ShuffledHit, index: u32, quads: u32, r: ptr<function, BlockBlend>) {
     let ca = column_alpha(h.s, (*r).a.px);
     if (quads & 1u) != 0u {
