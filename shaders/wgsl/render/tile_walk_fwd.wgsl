@@ -49,26 +49,17 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
 // what this does (standard scene, shader_ab.py, 8 rounds each).
 fn blend_block(h: ShuffledHit, index: u32, quads: u32, r: ptr<function, BlockBlend>) {
     let ca = column_alpha(h.s, (*r).a.px);
-    if (quads & 1u) != 0u {
-        var st = (*r).a.state;
-        blend_pixel(h, ca, 0u, index, MAX_ALPHA, &st);
-        (*r).a.state = st;
-    }
-    if (quads & 2u) != 0u {
-        var st = (*r).b.state;
-        blend_pixel(h, ca, 1u, index, MAX_ALPHA, &st);
-        (*r).b.state = st;
-    }
-    if (quads & 4u) != 0u {
-        var st = (*r).c.state;
-        blend_pixel(h, ca, 2u, index, MAX_ALPHA, &st);
-        (*r).c.state = st;
-    }
-    if (quads & 8u) != 0u {
-        var st = (*r).d.state;
-        blend_pixel(h, ca, 3u, index, MAX_ALPHA, &st);
-        (*r).d.state = st;
-    }
+    if (quads & 1u) != 0u { (*r).a.state = blended(h, ca, 0u, index, (*r).a.state); }
+    if (quads & 2u) != 0u { (*r).b.state = blended(h, ca, 1u, index, (*r).b.state); }
+    if (quads & 4u) != 0u { (*r).c.state = blended(h, ca, 2u, index, (*r).c.state); }
+    if (quads & 8u) != 0u { (*r).d.state = blended(h, ca, 3u, index, (*r).d.state); }
+}
+
+// Pixel k's state `st` after blending `h` into it (blend_pixel on a copy).
+fn blended(h: ShuffledHit, ca: ColumnAlpha, k: u32, index: u32, st: BlendState) -> BlendState {
+    var s = st;
+    blend_pixel(h, ca, k, index, MAX_ALPHA, &s);
+    return s;
 }
 
 fn end_block_batch(r: ptr<function, BlockBlend>) {
