@@ -61,6 +61,9 @@ def main() -> int:
     if args.rounds < 1:
         print(f"--rounds {args.rounds}: needs at least 1", file=sys.stderr)
         return 2
+    if not 16 <= args.size <= 4096:
+        print(f"--size {args.size}: must lie in 16..4096", file=sys.stderr)
+        return 2
     if not 1 <= args.count <= MAX_SURFELS:
         print(f"--count {args.count}: must lie in 1..{MAX_SURFELS} (the renderer's surfel limit)", file=sys.stderr)
         return 2
@@ -71,9 +74,6 @@ def main() -> int:
             return 2
     ctx = get_context()
     print(f"adapter: {ctx.name}; {machine()}")
-    if not 16 <= args.size <= 4096:
-        print(f"--size {args.size}: must lie in 16..4096", file=sys.stderr)
-        return 2
     scene, cam = scene_and_camera(args.count, args.scene, args.size)
     surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
                                         scene["colors"])

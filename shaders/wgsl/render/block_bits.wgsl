@@ -51,8 +51,9 @@ fn tile_quads(rows: u32, top: u32, blocks: u32) -> u32 {
     let first = (clamp(rows & 0xffffu, top, top + 15u) - top) >> 1u;   // row pairs of the tile, 0-7
     let last = (clamp(rows >> 16u, top, top + 15u) - top) >> 1u;
     let pairs = ((2u << last) - 1u) & ~((1u << first) - 1u);
-    // Band 0's pairs (bits 0-3) into each of its four blocks' nibbles, band 1's (bits 4-7) likewise.
-    return (((pairs & 15u) | ((pairs & 0xf0u) << 12u)) * 0x1111u) & block_nibbles(blocks);
+    // Band 0's pairs (bits 0-3) into each of its four blocks' nibbles, band 1's (bits 4-7) likewise: the
+    // spread that expand_block_bits makes of a band's four columns.
+    return expand_block_bits(pairs) & block_nibbles(blocks);
 }
 
 // Block bits (bit g: block g) to their quads' nibbles (bits 4 g .. 4 g + 3, see tile_quads).
