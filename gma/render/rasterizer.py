@@ -295,10 +295,12 @@ class SurfelRasterizer:
         empty = self.workspace.get("empty", 64)
         if n > 0:
             self._setup(encoder, st, timer)
-            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups})
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups,
+                                                                   "SG": defines["SG"]})
             # Emission writes scratch lists that the tile sort reads, and the sort writes the kept ones
-            # (no copy back after its one pass on lavapipe: gpu_sort.py).
-            emitted = (self.workspace.get("emitted_tiles", 4 * cap), self.workspace.get("emitted_ids", 4 * cap))
+            # (no copy back after its one pass on lavapipe: gpu_sort.py); one spare entry past the capacity
+            # takes the subgroup variant's stores of tiles it does not list (emit_isects.wgsl).
+            emitted = (self.workspace.get("emitted_tiles", 4 * cap + 4), self.workspace.get("emitted_ids", 4 * cap + 4))
             emit_resources = dict(enumerate([st.params, st.depth_order, st.isect_offsets, st.tile_counts,
                                              st.tile_rects, *emitted]))
             if records:

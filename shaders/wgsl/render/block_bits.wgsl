@@ -5,17 +5,25 @@
 // the ids it reads anyway: no mask pass and no mask buffer. (A pass after the tile sort that wrote each
 // intersection's mask cost 2.5-3 ms on the standard scene.)
 
-// The tile's block columns (bits 0-3, tile column `tcol` = x / 4 of its left edge) in band `band`
-// (absolute 8-row band) of a surfel with block bands `w` (see write_bands in project_fwd.wgsl).
-fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {
+// The block columns [first, last] (absolute 4-pixel columns, i32) in 8-row band `band` (absolute) that a
+// surfel with block bands `w` (see write_bands in project_fwd.wgsl) can reach; first > last when none.
+// It depends on the band only, so emission works it out once per tile row (span_columns per tile).
+fn band_span(w: vec2<u32>, band: u32) -> vec2<i32> {
     let j = band - (w.x & 0x1fffu);   // wraps above the first band
     let nb = (w.x >> 13u) & 3u;
-    let col0 = i32(w.x >> 15u) - i32(tcol);
+    let col0 = i32(w.x >> 15u);
     let bits = w.y >> (10u * min(j, 2u));
-    let lo = max(col0 + select(i32(bits & 31u), 0, nb == 0u), 0);
-    let hi = min(select(col0 + i32((bits >> 5u) & 31u), i32(w.y) - i32(tcol), nb == 0u), 3);
-    let cols = ((2u << u32(max(hi, 0))) - 1u) & ~((1u << u32(min(lo, 3))) - 1u);
-    return select(0u, cols, (nb == 0u || j < nb) && lo <= hi);
+    let first = select(col0 + i32(bits & 31u), col0, nb == 0u);
+    let last = select(col0 + i32((bits >> 5u) & 31u), i32(w.y), nb == 0u);
+    return select(vec2<i32>(1, 0), vec2<i32>(first, last), nb == 0u || j < nb);
+}
+
+// Bits 0-3: which of the four block columns from `tcol` (a tile's first) lie in `span` (band_span).
+// Each clamped shift leaves out the columns before the span's first / after its last, so an empty span
+// (first > last) gives none.
+fn span_columns(span: vec2<i32>, tcol: u32) -> u32 {
+    let t = i32(tcol);
+    return (15u << u32(clamp(span.x - t, 0, 4))) & (15u >> u32(clamp(t + 3 - span.y, 0, 4)));
 }
 
 // The block columns (4 bits each) of tile `tile`'s two 8-row bands (a subgroup's height, so a finer mask
@@ -30,10 +38,10 @@ fn band_columns(w: vec2<u32>, band: u32, tcol: u32) -> u32 {
 // (noise). Tried: computing the ellipse's columns while staging (32 bytes per surfel read; standard
 // -3 to -5 %, avatar +5 to +8 %); per-band words read from 64 or 16 bytes per surfel (standard -5 to
 // -6 %, avatar +4 to +6 % and +2 to +4 %): the extra bytes per staged surfel miss the cache.
-fn tile_block_bits(w: vec2<u32>, tile: u32, tile_grid_x: u32) -> u32 {
-    let band = (tile / tile_grid_x) * (TILE_SIZE / 8u);
-    let tcol = (tile % tile_grid_x) * (TILE_SIZE / 4u);
-    return band_columns(w, band, tcol) | (band_columns(w, band + 1u, tcol) << 4u);
+fn tile_block_bits(w: vec2<u32>, tile_x: u32, tile_y: u32) -> u32 {
+    let band = tile_y * (TILE_SIZE / 8u);
+    let tcol = tile_x * (TILE_SIZE / 4u);
+    return span_columns(band_span(w, band), tcol) | (span_columns(band_span(w, band + 1u), tcol) << 4u);
 }
 
 // The blocks (bit by * 4 + bx, block_bit in rasterize_core.wgsl) of tile_block_bits' 8 bits.

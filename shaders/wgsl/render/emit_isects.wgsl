@@ -6,8 +6,9 @@
 // rasterize_bwd.wgsl): each key also carries, from bit RECORD_KEY_SHIFT, the intersection's number k
 // within its surfel's list, and the surfel's first list index goes to record_base, so that the
 // intersection's emission index, record_base[surfel] + k, is known after the tile sort too.
-// Define BLOCK_BITS (the rasterizers' subgroup variant): each surfel id carries, from bit SURFEL_ID_BITS,
-// the tile's blocks the surfel can reach (tile_block_bits in block_bits.wgsl).
+// Define BLOCK_BITS (with SG; the rasterizers' subgroup variant, CPU drivers): each surfel id carries,
+// from bit SURFEL_ID_BITS, the tile's blocks the surfel can reach (tile_block_bits in block_bits.wgsl),
+// and the subgroup steps through its lanes' rectangles together (see that main below).
 #include "common/render_types.wgsl"
 #include "render/block_bits.wgsl"
 
@@ -25,6 +26,66 @@
 @group(0) @binding(8) var<storage, read> block_bands: array<vec2<u32>>;   // [N] see write_bands
 #endif
 
+#if BLOCK_BITS
+// Largest of the subgroup's values, in every lane (xor-shuffles; see lanes_max in rasterize_core.wgsl:
+// lavapipe runs subgroupMax as a loop over the lanes).
+fn lanes_max(v: u32) -> u32 {
+    var r = max(v, subgroupShuffleXor(v, 1u));
+    if SG > 2u { r = max(r, subgroupShuffleXor(r, 2u)); }   // constant conditions
+    if SG > 4u { r = max(r, subgroupShuffleXor(r, 4u)); }
+    if SG > 8u { r = max(r, subgroupShuffleXor(r, 8u)); }
+    if SG > 16u { r = max(r, subgroupShuffleXor(r, 16u)); }
+    if SG > 32u { r = max(r, subgroupShuffleXor(r, 32u)); }
+    return r;
+}
+
+// The CPU drivers' variant (BLOCK_BITS): the subgroup steps through its lanes' tile
+// rectangles together, one tile of each per step, as many steps as the largest rectangle (uniform), and
+// every lane stores in every step: a tile that is not listed, past the lane's rectangle or past the
+// capacity goes to the spare entry at isect_capacity, which nothing reads. Lavapipe makes each store a
+// loop over the lanes, with a branch per lane when the store sits under a divergent condition (the
+// nested loops over each lane's own rectangle and its skips); here there is none. The block bits take
+// the tile's column and row (no integer division: lavapipe divides lane by lane). Standard scene (100k
+// surfels, 224k intersections), lavapipe, in the forward, both versions in one process, 22 rounds:
+// this pass 7.74 -> 6.47 ms (0.835x; the block bits' divisions 0.90x, the uniform steps 0.945x).
+@compute @workgroup_size(256)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    let valid = i < params.num_surfels;
+    let sid = sorted_ids[min(i, params.num_surfels - 1u)];
+    let count = select(0u, tile_counts[sid], valid);
+    let tiles = tile_rects[sid];
+    let lo = vec2<u32>(tiles.x & 0xffffu, tiles.x >> 16u);
+    let hi = vec2<u32>(tiles.y & 0xffffu, tiles.y >> 16u);
+    let area = select(0u, (hi.x - lo.x + 1u) * (hi.y - lo.y + 1u), count != 0u);
+    let first = select(0u, offsets[min(i, params.num_surfels - 1u)], valid);
+#if RECORD_KEYS
+    if count != 0u {
+        record_base[sid] = first;
+    }
+#endif
+    let cap = params.isect_capacity;
+    let bands = block_bands[sid];
+    let trips = subgroupBroadcast(lanes_max(area), 0u);
+    var out = first;
+    var t = lo;   // this step's tile
+    for (var k = 0u; k < trips; k++) {
+        let bit = (t.y - lo.y) * 16u + t.x - lo.x;
+        let listed = k < area && (tiles.w != 0u || ((tiles.z >> bit) & 1u) != 0u);
+        let at = select(cap, out, listed && out < cap);
+        let tile_id = t.y * params.tile_grid.x + t.x;
+#if RECORD_KEYS
+        isect_tiles[at] = tile_id | ((out - first) << RECORD_KEY_SHIFT);
+#else
+        isect_tiles[at] = tile_id;
+#endif
+        isect_ids[at] = sid | (tile_block_bits(bands, t.x, t.y) << SURFEL_ID_BITS);
+        out += u32(listed);
+        let wrap = t.x >= hi.x;
+        t = vec2<u32>(select(t.x + 1u, lo.x, wrap), t.y + u32(wrap));
+    }
+}
+#else
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
@@ -44,9 +105,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     record_base[sid] = first;
 #endif
     let cap = params.isect_capacity;
-#if BLOCK_BITS
-    let bands = block_bands[sid];
-#endif
     for (var ty = lo.y; ty <= hi.y; ty++) {
         for (var tx = lo.x; tx <= hi.x; tx++) {
             if tiles.w == 0u && ((tiles.z >> ((ty - lo.y) * 16u + tx - lo.x)) & 1u) == 0u {
@@ -60,13 +118,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             isect_tiles[out] = ty * params.tile_grid.x + tx;
 #endif
-#if BLOCK_BITS
-            let tile_id = ty * params.tile_grid.x + tx;
-            isect_ids[out] = sid | (tile_block_bits(bands, tile_id, params.tile_grid.x) << SURFEL_ID_BITS);
-#else
             isect_ids[out] = sid;
-#endif
             out++;
         }
     }
 }
+#endif
