@@ -78,6 +78,8 @@ def main() -> None:
                          "machine; the test suite's smoke run)")
     ap.add_argument("--out", help="keep the exports and renders in this directory (new or empty)")
     args = ap.parse_args()
+    if not 16 <= args.size <= 4096:
+        ap.error(f"--size {args.size}: must lie in 16..4096 (pixels of the round trip's square renders)")
     if args.avatar is not None and not Path(args.avatar).is_file():
         ap.error(f"{args.avatar}: avatar file not found")
     if args.out is None:

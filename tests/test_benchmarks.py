@@ -98,3 +98,14 @@ def test_benchmark_runs(script, smoke_runs):
         pytest.skip(reason)
     cmd, out = smoke_runs[script].result()
     assert out.returncode == 0, f"{' '.join(cmd)}\n{out.stdout[-2000:]}\n{out.stderr[-3000:]}"
+
+
+@pytest.mark.parametrize("args", [["interop.py", "--size", "0"], ["interop.py", "--size", "99999"],
+                                  ["shader_ab.py", "shaders/wgsl", "shaders/wgsl", "--size", "8"]])
+def test_out_of_range_sizes_get_one_line_and_exit_2(args):
+    """A size the renderer cannot take is refused with its range before any GPU or avatar work (it used to
+    fail inside the renderer with a traceback)."""
+    out = subprocess.run([sys.executable, str(BENCH / args[0]), *args[1:]], cwd=REPO, capture_output=True,
+                         text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr and "must lie in" in out.stderr.strip().splitlines()[-1]
