@@ -295,8 +295,7 @@ class SurfelRasterizer:
         empty = self.workspace.get("empty", 64)
         if n > 0:
             self._setup(encoder, st, timer)
-            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups,
-                                                                   "SG": defines["SG"]})
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups})
             # Emission writes scratch lists that the tile sort reads, and the sort writes the kept ones
             # (no copy back after its one pass on lavapipe: gpu_sort.py); one spare entry past the capacity
             # takes the subgroup variant's stores of tiles it does not list (emit_isects.wgsl).

@@ -6,7 +6,7 @@
 // rasterize_bwd.wgsl): each key also carries, from bit RECORD_KEY_SHIFT, the intersection's number k
 // within its surfel's list, and the surfel's first list index goes to record_base, so that the
 // intersection's emission index, record_base[surfel] + k, is known after the tile sort too.
-// Define BLOCK_BITS (with SG; the rasterizers' subgroup variant, CPU drivers): each surfel id carries,
+// Define BLOCK_BITS (the rasterizers' subgroup variant, CPU drivers): each surfel id carries,
 // from bit SURFEL_ID_BITS, the tile's blocks the surfel can reach (tile_block_bits in block_bits.wgsl),
 // and the subgroup steps through its lanes' rectangles together (see that main below).
 #include "common/render_types.wgsl"
@@ -27,18 +27,6 @@
 #endif
 
 #if BLOCK_BITS
-// Largest of the subgroup's values, in every lane (xor-shuffles; see lanes_max in rasterize_core.wgsl:
-// lavapipe runs subgroupMax as a loop over the lanes).
-fn lanes_max(v: u32) -> u32 {
-    var r = max(v, subgroupShuffleXor(v, 1u));
-    if SG > 2u { r = max(r, subgroupShuffleXor(r, 2u)); }   // constant conditions
-    if SG > 4u { r = max(r, subgroupShuffleXor(r, 4u)); }
-    if SG > 8u { r = max(r, subgroupShuffleXor(r, 8u)); }
-    if SG > 16u { r = max(r, subgroupShuffleXor(r, 16u)); }
-    if SG > 32u { r = max(r, subgroupShuffleXor(r, 32u)); }
-    return r;
-}
-
 // The CPU drivers' variant (BLOCK_BITS): the subgroup steps through its lanes' tile
 // rectangles together, one tile of each per step, as many steps as the largest rectangle (uniform), and
 // every lane stores in every step: a tile that is not listed, past the lane's rectangle or past the
@@ -66,7 +54,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #endif
     let cap = params.isect_capacity;
     let bands = block_bands[sid];
-    let trips = subgroupBroadcast(lanes_max(area), 0u);
+    // Over the subgroup as it runs, whatever its size (a loop over the lanes on lavapipe, once per surfel).
+    let trips = subgroupBroadcast(subgroupMax(area), 0u);
     var out = first;
     var t = lo;   // this step's tile
     for (var k = 0u; k < trips; k++) {
