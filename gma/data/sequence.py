@@ -31,6 +31,7 @@ from PIL import Image
 from gma.body.params import SequenceBody, load_body, require_body_model, save_body
 from gma.core.atomic import atomic_dir, atomic_write_json
 from gma.core.errors import InputError
+from gma.core.images import read_image
 from gma.core.outputs import prepare_output_dir
 from gma.data.cameras import Cameras, load_cameras, save_cameras, validate_cameras
 
@@ -82,7 +83,7 @@ class Sequence:
     def _read(self, path: Path) -> np.ndarray:
         """The image at ``path`` as float32 [H, W] or [H, W, C] in [0, 1], whatever its bit depth."""
         try:
-            img = iio.imread(path)
+            img = read_image(path)
         except (OSError, ValueError, SyntaxError) as exc:  # truncated or corrupt files
             raise InputError(f"{path}: cannot be read as an image (truncated or damaged? {exc})") from None
         if img.shape[:2] != (self.height, self.width):

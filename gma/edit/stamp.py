@@ -60,13 +60,13 @@ class StampPlacement:
 
 def load_stamp_image(path) -> np.ndarray:
     """[h, w, 4] float32 RGBA in [0, 1] from an image file (alpha 1 where the file has none)."""
-    import imageio.v3 as iio
+    from gma.core.images import read_image
 
     path = Path(path)
     if not path.is_file():
         raise EditError(f"stamp image {path} does not exist")
     try:
-        img = np.asarray(iio.imread(path))
+        img = np.asarray(read_image(path))
     except Exception as exc:  # imageio raises many types for a bad file
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise EditError(f"cannot read stamp image {path}: {first}") from None

@@ -87,14 +87,14 @@ def work_dir(out: str | os.PathLike) -> Path:
 
 
 def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, int]) -> np.ndarray:
-    import imageio.v3 as iio
+    from gma.core.images import read_image
 
     files = sorted(p for p in Path(mask_dir).glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if len(files) != n:
         raise ValueError(f"{mask_dir}: {len(files)} mask images for {n} video frames")
     out = []
     for i in idx:
-        m = mask_from_array(iio.imread(files[i]), files[i])
+        m = mask_from_array(read_image(files[i]), files[i])
         if m.shape != shape:
             raise ValueError(f"{files[i]}: mask is {m.shape[1]}x{m.shape[0]}, video is {shape[1]}x{shape[0]}")
         out.append(m)
