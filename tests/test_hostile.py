@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import shutil
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -336,11 +337,17 @@ def test_hostile_input(case, tmp_path, seq_dir, avatar_file, capsys, monkeypatch
             monkeypatch.setenv(key, value)
     argv = case.make(work, seq_dir, avatar_file)
     before, seq_before = _snapshot(work), _snapshot(seq_dir)
-    try:
-        code = main(argv)
-    except SystemExit as exc:  # argparse
-        code = exc.code
-    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse
+            code = exc.code
+    # A warning a user would see is a line more (Python's default filters hide these four categories;
+    # glfw's errors came as warnings before the viewer's own line).
+    hidden = (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning)
+    shown = [f"{w.category.__name__}: {w.message}" for w in caught if not issubclass(w.category, hidden)]
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()] + shown
     assert code == 2, f"exit {code}: {err}"
     assert err, "no message"
     line = err[-1]
