@@ -66,6 +66,7 @@ class RecordIndex:
 
     isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
     record_base: wgpu.GPUBuffer   # [N] by surfel id (written for listed surfels only)
+    used_blocks: wgpu.GPUBuffer   # tile-sorted: the blocks where a pixel took the surfel (tile_walk_fwd.wgsl)
 
 
 @dataclass
@@ -287,7 +288,8 @@ class SurfelRasterizer:
             isect_ids = take(4 * cap, "isect_ids", STORAGE)
             ranges = take(8 * tx * ty, "tile_ranges", STORAGE)
             if self._records_for(camera, surfels.channels, capacity):
-                records = RecordIndex(take(4 * cap, "isect_keys", STORAGE), take(4 * max(n, 1), "record_base", STORAGE))
+                records = RecordIndex(take(4 * cap, "isect_keys", STORAGE), take(4 * max(n, 1), "record_base", STORAGE),
+                                      take(4 * cap, "used_blocks", STORAGE))
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
         defines = self.raster_defines(surfels.channels)
@@ -319,8 +321,11 @@ class SurfelRasterizer:
             raster = ctx.compute_pipeline("render/rasterize_texture.wgsl", defines)
             resources = dict(enumerate(inputs + [target]))
         else:
-            raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay})
+            raster = ctx.compute_pipeline("render/rasterize_fwd.wgsl", {**defines, "REPLAY": replay,
+                                                                        "USED_BLOCKS": records is not None})
             resources = dict(enumerate(inputs + list(target)))
+            if records:
+                resources[19] = records.used_blocks
         if subgroups:
             self._subgroup_inputs(resources, st.colors4 if n else empty,
                                   (st.pixel_rows if n else empty) if defines["TILE_WALK"] else None)
@@ -397,7 +402,7 @@ class SurfelRasterizer:
             # ranges point, which this render wrote.
             kept = [*st.kept, isect_ids, ranges, *images, *replayed]
             if records:
-                kept += [records.isect_keys, records.record_base]
+                kept += [records.isect_keys, records.record_base, records.used_blocks]
             ctx.recycler.release_with(state, kept)
         return state
 
@@ -470,7 +475,7 @@ class SurfelRasterizer:
             v_colors = ctx.buffer(4 * c * n, "v_colors")
         if records:
             resources[12] = grads = self._cleared_records(enc, state.num_isects, normal_depth)
-            resources.update({16: records.isect_keys, 17: records.record_base})
+            resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks})
         else:
             grads = ctx.buffer(4 * 16 * n, "v_proj")
             resources[12] = grads

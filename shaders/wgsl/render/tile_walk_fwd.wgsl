@@ -23,6 +23,13 @@
 // split its per-pixel accumulations), and exact 4x2 quads from the surfel's ellipse (43 % skipped)
 // cost more to compute per hit than they saved (+10 % for the shape alone); neither was kept.
 
+#if USED_BLOCKS
+// For the backward's replay (tile_walk_bwd.wgsl), per intersection of the tile list (replayed renders):
+// the blocks (bit g) where some pixel took the surfel. The replay skips the others, where it would add
+// only zeros (measured there).
+@group(0) @binding(19) var<storage, read_write> used_blocks: array<u32>;
+#endif
+
 // The four pixels of a lane in one 4x8 block of the tile.
 struct BlockBlend {
     a: PixelBlend,
@@ -37,6 +44,18 @@ fn start_block_blend(origin: vec2<u32>, g: u32, sg_lane: u32) -> BlockBlend {
                       start_blend(pix + 3u * ROW_STEP));
 }
 
+// Bit g when a pixel of block r took the hit numbered `index` (its last contributor is now that hit),
+// where the walk records the used blocks (USED_BLOCKS); else 0, which the compiler drops.
+fn block_used(r: BlockBlend, g: u32, index: u32) -> u32 {
+#if USED_BLOCKS
+    let used = r.a.state.last == index || r.b.state.last == index || r.c.state.last == index
+            || r.d.state.last == index;
+    return select(0u, 1u << g, used);
+#else
+    return 0u;
+#endif
+}
+
 // Bit g unless every pixel of block g is saturated or outside the image (then no later surfel counts).
 fn block_open(b: BlockBlend, g: u32) -> u32 {
     return select(1u << g, 0u, all_lanes(is_done(b.a) && is_done(b.b) && is_done(b.c) && is_done(b.d)));
@@ -46,13 +65,14 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
 // branches are jumps): those in the rows of the surfel's box (tile_quads). Each pixel's state is copied
 // into a value of its branch and back, as in composite_quad's steps (lavapipe writes a variable that a
 // loop carries through the loop's lane mask); copying all four around the branches paid a third of
-// what this does (standard scene, shader_ab.py, 8 rounds each).
-fn blend_block(h: ShuffledHit, index: u32, quads: u32, r: ptr<function, BlockBlend>) {
+// what this does (standard scene, shader_ab.py, 8 rounds each). Returns block_used for this lane.
+fn blend_block(h: ShuffledHit, index: u32, quads: u32, g: u32, r: ptr<function, BlockBlend>) -> u32 {
     let ca = column_alpha(h.s, (*r).a.px);
     if (quads & 1u) != 0u { (*r).a.state = blended(h, ca, 0u, index, (*r).a.state); }
     if (quads & 2u) != 0u { (*r).b.state = blended(h, ca, 1u, index, (*r).b.state); }
     if (quads & 4u) != 0u { (*r).c.state = blended(h, ca, 2u, index, (*r).c.state); }
     if (quads & 8u) != 0u { (*r).d.state = blended(h, ca, 3u, index, (*r).d.state); }
+    return block_used(*r, g, index);
 }
 
 // Pixel k's state `st` after blending `h` into it (blend_pixel on a copy).
@@ -112,22 +132,58 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
             let mine_col = colors4[mine_sid];
             let mine_quads = tile_quads(pixel_rows[mine_sid], origin.y, mine_id >> SURFEL_ID_BITS);
             let open_quads = block_nibbles(open);
+#if USED_BLOCKS
+            // This lane's used blocks of the group's hits, hit k's at bits 8 (k % 4) of word k / 4: the OR
+            // over the lanes then takes two reductions per group instead of one per hit.
+            var used_lo = 0u;
+            var used_hi = 0u;
+#endif
             for (var k = 0u; k < n; k++) {
                 // Lane 0's copy of the shuffled quads: uniform, so the branches below are jumps.
                 let quads = subgroupBroadcast(subgroupShuffle(mine_quads, k), 0u) & open_quads;
                 if quads != 0u {
                     let hit = shuffle_hit(mine, mine_col, k);
                     let index = base + h + k + 1u - range.x;   // one past its local index (`last`)
-                    if ((quads >> 0u) & 15u) != 0u { blend_block(hit, index, (quads >> 0u) & 15u, &r0); }
-                    if ((quads >> 4u) & 15u) != 0u { blend_block(hit, index, (quads >> 4u) & 15u, &r1); }
-                    if ((quads >> 8u) & 15u) != 0u { blend_block(hit, index, (quads >> 8u) & 15u, &r2); }
-                    if ((quads >> 12u) & 15u) != 0u { blend_block(hit, index, (quads >> 12u) & 15u, &r3); }
-                    if ((quads >> 16u) & 15u) != 0u { blend_block(hit, index, (quads >> 16u) & 15u, &r4); }
-                    if ((quads >> 20u) & 15u) != 0u { blend_block(hit, index, (quads >> 20u) & 15u, &r5); }
-                    if ((quads >> 24u) & 15u) != 0u { blend_block(hit, index, (quads >> 24u) & 15u, &r6); }
-                    if ((quads >> 28u) & 15u) != 0u { blend_block(hit, index, (quads >> 28u) & 15u, &r7); }
+                    var used = 0u;   // block_used of the blocks it reaches
+                    if ((quads >> 0u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 0u) & 15u, 0u, &r0);
+                    }
+                    if ((quads >> 4u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 4u) & 15u, 1u, &r1);
+                    }
+                    if ((quads >> 8u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 8u) & 15u, 2u, &r2);
+                    }
+                    if ((quads >> 12u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 12u) & 15u, 3u, &r3);
+                    }
+                    if ((quads >> 16u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 16u) & 15u, 4u, &r4);
+                    }
+                    if ((quads >> 20u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 20u) & 15u, 5u, &r5);
+                    }
+                    if ((quads >> 24u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 24u) & 15u, 6u, &r6);
+                    }
+                    if ((quads >> 28u) & 15u) != 0u {
+                        used |= blend_block(hit, index, (quads >> 28u) & 15u, 7u, &r7);
+                    }
+#if USED_BLOCKS
+                    if k < 4u {
+                        used_lo |= used << (8u * k);
+                    } else {
+                        used_hi |= used << (8u * (k - 4u));
+                    }
+#endif
                 }
             }
+#if USED_BLOCKS
+            let word = select(lanes_or(used_lo), lanes_or(used_hi), sg_lane >= 4u);   // lane l: hit l's
+            if sg_lane < n {
+                used_blocks[base + h + sg_lane] = (word >> (8u * (sg_lane & 3u))) & 255u;
+            }
+#endif
         }
         end_block_batch(&r0);
         end_block_batch(&r1);
