@@ -61,18 +61,25 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
     return select(1u << g, 0u, all_lanes(is_done(b.a) && is_done(b.b) && is_done(b.c) && is_done(b.d)));
 }
 
-// Blend `h` into block *r's pixels among `quads` (a lane's pixel k in bit k; subgroup-uniform, so the
-// branches are jumps): those in the rows of the surfel's box (tile_quads). Each pixel's state is copied
-// into a value of its branch and back, as in composite_quad's steps (lavapipe writes a variable that a
-// loop carries through the loop's lane mask); copying all four around the branches paid a third of
-// what this does (standard scene, shader_ab.py, 8 rounds each). Returns block_used for this lane.
-fn blend_block(h: ShuffledHit, index: u32, quads: u32, g: u32, r: ptr<function, BlockBlend>) -> u32 {
+// Blend `h` into the pixels of block g (*r) among its quads (nibble g of hit_quads: a lane's pixel k in
+// bit k; subgroup-uniform, so the branches are jumps): those in the rows of the surfel's box
+// (tile_quads). Each pixel's state is copied into a value of its branch and back, as in composite_quad's
+// steps (lavapipe writes a variable that a loop carries through the loop's lane mask); copying all four
+// around the branches paid a third of what this does (standard scene, shader_ab.py, 8 rounds each).
+// Returns block_used for this lane.
+fn blend_block(h: ShuffledHit, index: u32, hit_quads: u32, g: u32, r: ptr<function, BlockBlend>) -> u32 {
+    let quads = block_quads(hit_quads, g);
     let ca = column_alpha(h.s, (*r).a.px);
     if (quads & 1u) != 0u { (*r).a.state = blended(h, ca, 0u, index, (*r).a.state); }
     if (quads & 2u) != 0u { (*r).b.state = blended(h, ca, 1u, index, (*r).b.state); }
     if (quads & 4u) != 0u { (*r).c.state = blended(h, ca, 2u, index, (*r).c.state); }
     if (quads & 8u) != 0u { (*r).d.state = blended(h, ca, 3u, index, (*r).d.state); }
     return block_used(*r, g, index);
+}
+
+// Block g's nibble of a hit's quads (bits 4 g .. 4 g + 3, see tile_quads).
+fn block_quads(quads: u32, g: u32) -> u32 {
+    return (quads >> (4u * g)) & 15u;
 }
 
 // Pixel k's state `st` after blending `h` into it (blend_pixel on a copy).
@@ -145,30 +152,14 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
                     let hit = shuffle_hit(mine, mine_col, k);
                     let index = base + h + k + 1u - range.x;   // one past its local index (`last`)
                     var used = 0u;   // block_used of the blocks it reaches
-                    if ((quads >> 0u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 0u) & 15u, 0u, &r0);
-                    }
-                    if ((quads >> 4u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 4u) & 15u, 1u, &r1);
-                    }
-                    if ((quads >> 8u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 8u) & 15u, 2u, &r2);
-                    }
-                    if ((quads >> 12u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 12u) & 15u, 3u, &r3);
-                    }
-                    if ((quads >> 16u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 16u) & 15u, 4u, &r4);
-                    }
-                    if ((quads >> 20u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 20u) & 15u, 5u, &r5);
-                    }
-                    if ((quads >> 24u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 24u) & 15u, 6u, &r6);
-                    }
-                    if ((quads >> 28u) & 15u) != 0u {
-                        used |= blend_block(hit, index, (quads >> 28u) & 15u, 7u, &r7);
-                    }
+                    if block_quads(quads, 0u) != 0u { used |= blend_block(hit, index, quads, 0u, &r0); }
+                    if block_quads(quads, 1u) != 0u { used |= blend_block(hit, index, quads, 1u, &r1); }
+                    if block_quads(quads, 2u) != 0u { used |= blend_block(hit, index, quads, 2u, &r2); }
+                    if block_quads(quads, 3u) != 0u { used |= blend_block(hit, index, quads, 3u, &r3); }
+                    if block_quads(quads, 4u) != 0u { used |= blend_block(hit, index, quads, 4u, &r4); }
+                    if block_quads(quads, 5u) != 0u { used |= blend_block(hit, index, quads, 5u, &r5); }
+                    if block_quads(quads, 6u) != 0u { used |= blend_block(hit, index, quads, 6u, &r6); }
+                    if block_quads(quads, 7u) != 0u { used |= blend_block(hit, index, quads, 7u, &r7); }
 #if USED_BLOCKS
                     if k < 4u {
                         used_lo |= used << (8u * k);
