@@ -39,26 +39,21 @@ _TOOL_KEYS = {glfw.KEY_N: "navigate", glfw.KEY_B: "box", glfw.KEY_L: "lasso", gl
               glfw.KEY_M: "wand", glfw.KEY_P: "paint", glfw.KEY_I: "eyedropper", glfw.KEY_T: "stamp"}
 
 
-class _glfw_errors_raised:
-    """glfw reports its errors as Python warnings by default, which would print two lines of warning
-    before the viewer's own one-line message; within this block they are raised instead, and the caller
-    puts the reason into its message."""
-
-    def __enter__(self):
-        self.before, glfw.ERROR_REPORTING = glfw.ERROR_REPORTING, "raise"
-
-    def __exit__(self, *exc):
-        glfw.ERROR_REPORTING = self.before
-
-
-def _glfw_reason(exc: Exception) -> str:
-    """glfw's message without its error code and bytes quoting: "X11: The DISPLAY environment variable is
-    missing"."""
-    text = str(exc)
-    for quote in ("b'", 'b"'):
-        if quote in text:
-            text = text.split(quote, 1)[1].rstrip("'\"")
-    return text
+def _glfw_try(call, *args):
+    """(call(*args), "") or, when glfw reports an error, (None, its reason: "X11: The DISPLAY environment
+    variable is missing"). glfw reports errors as Python warnings by default, which would print two lines
+    before the viewer's own one-line message; here they are raised and caught instead."""
+    before, glfw.ERROR_REPORTING = glfw.ERROR_REPORTING, "raise"
+    try:
+        return call(*args), ""
+    except glfw.GLFWError as exc:   # "(65550) b'X11: ...'": the code and the bytes quoting dropped
+        text = str(exc)
+        for quote in ("b'", 'b"'):
+            if quote in text:
+                text = text.split(quote, 1)[1].rstrip("'\"")
+        return None, text
+    finally:
+        glfw.ERROR_REPORTING = before
 
 
 class ViewerWindow:
@@ -73,24 +68,17 @@ class ViewerWindow:
                  adaptive: bool = True):
         self.state, self.ctx = state, state.ctx
         self.ctx.check_image_size(int(width), int(height), "window")  # before glfw/wgpu, which abort on it
-        with _glfw_errors_raised():
-            try:
-                ok, why = glfw.init(), ""
-            except glfw.GLFWError as exc:
-                ok, why = False, f" ({_glfw_reason(exc)})"
+        ok, why = _glfw_try(glfw.init)
         if not ok:
-            raise DeviceError(f"cannot open a window: no display{why}; set DISPLAY, or run under xvfb-run "
-                              "(`gma render` makes videos without one)")
+            raise DeviceError(f"cannot open a window: no display{f' ({why})' if why else ''}; set DISPLAY, or "
+                              "run under xvfb-run (`gma render` makes videos without one)")
         glfw.window_hint(glfw.CLIENT_API, glfw.NO_API)
         glfw.window_hint(glfw.VISIBLE, visible)
         self.title = title
-        with _glfw_errors_raised():
-            try:
-                self.window, why = glfw.create_window(int(width), int(height), title, None, None), ""
-            except glfw.GLFWError as exc:
-                self.window, why = None, f": {_glfw_reason(exc)}"
+        self.window, why = _glfw_try(glfw.create_window, int(width), int(height), title, None, None)
         if not self.window:
-            raise DeviceError(f"glfw could not create a {width}x{height} window on this display{why}")
+            raise DeviceError(f"glfw could not create a {width}x{height} window on this display"
+                              f"{f': {why}' if why else ''}")
         self.context = wgpu.gpu.get_canvas_context(get_glfw_present_info(self.window, vsync=vsync))
         caps = [str(f) for f in self.context._get_capabilities(self.ctx.adapter)["formats"]]
         # A non-sRGB target keeps the surfel image's bytes as they are (the offscreen render is rgba8unorm).
