@@ -7,7 +7,7 @@
 
 // The block columns [first, last] (absolute 4-pixel columns, i32) in 8-row band `band` (absolute) that a
 // surfel with block bands `w` (see write_bands in project_fwd.wgsl) can reach; first > last when none.
-// It depends on the band only, so emission works it out once per tile row (span_columns per tile).
+// span_columns clips it to a tile's four columns without branches.
 fn band_span(w: vec2<u32>, band: u32) -> vec2<i32> {
     let j = band - (w.x & 0x1fffu);   // wraps above the first band
     let nb = (w.x >> 13u) & 3u;

@@ -26,6 +26,20 @@
 @group(0) @binding(8) var<storage, read> block_bands: array<vec2<u32>>;   // [N] see write_bands
 #endif
 
+// Whether tile t of a surfel's rectangle (tile_list's `tiles`, first tile `lo`) lists it.
+fn listed_in(tiles: vec4<u32>, lo: vec2<u32>, t: vec2<u32>) -> bool {
+    return tiles.w != 0u || ((tiles.z >> ((t.y - lo.y) * 16u + t.x - lo.x)) & 1u) != 0u;
+}
+
+// The sort key of the surfel's intersection number `number` (from 0) in tile t.
+fn isect_key(t: vec2<u32>, number: u32) -> u32 {
+#if RECORD_KEYS
+    return (t.y * params.tile_grid.x + t.x) | (number << RECORD_KEY_SHIFT);
+#else
+    return t.y * params.tile_grid.x + t.x;
+#endif
+}
+
 #if BLOCK_BITS
 // The CPU drivers' variant (BLOCK_BITS): the subgroup steps through its lanes' tile
 // rectangles together, one tile of each per step, as many steps as the largest rectangle (uniform), and
@@ -40,13 +54,14 @@
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
     let valid = i < params.num_surfels;
-    let sid = sorted_ids[min(i, params.num_surfels - 1u)];
+    let j = min(i, params.num_surfels - 1u);   // lanes past the end read the last surfel and store nothing
+    let sid = sorted_ids[j];
     let count = select(0u, tile_counts[sid], valid);
     let tiles = tile_rects[sid];
     let lo = vec2<u32>(tiles.x & 0xffffu, tiles.x >> 16u);
     let hi = vec2<u32>(tiles.y & 0xffffu, tiles.y >> 16u);
     let area = select(0u, (hi.x - lo.x + 1u) * (hi.y - lo.y + 1u), count != 0u);
-    let first = select(0u, offsets[min(i, params.num_surfels - 1u)], valid);
+    let first = select(0u, offsets[j], valid);
 #if RECORD_KEYS
     if count != 0u {
         record_base[sid] = first;
@@ -59,15 +74,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var out = first;
     var t = lo;   // this step's tile
     for (var k = 0u; k < trips; k++) {
-        let bit = (t.y - lo.y) * 16u + t.x - lo.x;
-        let listed = k < area && (tiles.w != 0u || ((tiles.z >> bit) & 1u) != 0u);
+        let listed = k < area && listed_in(tiles, lo, t);
         let at = select(cap, out, listed && out < cap);
-        let tile_id = t.y * params.tile_grid.x + t.x;
-#if RECORD_KEYS
-        isect_tiles[at] = tile_id | ((out - first) << RECORD_KEY_SHIFT);
-#else
-        isect_tiles[at] = tile_id;
-#endif
+        isect_tiles[at] = isect_key(t, out - first);
         isect_ids[at] = sid | (tile_block_bits(bands, t.x, t.y) << SURFEL_ID_BITS);
         out += u32(listed);
         let wrap = t.x >= hi.x;
@@ -96,17 +105,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cap = params.isect_capacity;
     for (var ty = lo.y; ty <= hi.y; ty++) {
         for (var tx = lo.x; tx <= hi.x; tx++) {
-            if tiles.w == 0u && ((tiles.z >> ((ty - lo.y) * 16u + tx - lo.x)) & 1u) == 0u {
+            if !listed_in(tiles, lo, vec2<u32>(tx, ty)) {
                 continue;
             }
             if out >= cap {
                 return;
             }
-#if RECORD_KEYS
-            isect_tiles[out] = (ty * params.tile_grid.x + tx) | ((out - first) << RECORD_KEY_SHIFT);
-#else
-            isect_tiles[out] = ty * params.tile_grid.x + tx;
-#endif
+            isect_tiles[out] = isect_key(vec2<u32>(tx, ty), out - first);
             isect_ids[out] = sid;
             out++;
         }
