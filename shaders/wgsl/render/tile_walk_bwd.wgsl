@@ -39,8 +39,6 @@ struct BlockReplay {
     b: PixelReplay,
     c: PixelReplay,
     d: PixelReplay,
-    count: u32,   // local intersections before the block's furthest last contributor (subgroup-uniform; the
-                  // furthest of the eight bounds the walk)
 }
 
 // A hit's gradient over the lane's pixels of every block it reached, with the ray transform's part still
@@ -64,8 +62,12 @@ fn start_block_replay(origin: vec2<u32>, g: u32, sg_lane: u32) -> BlockReplay {
     r.b = start_replay(pix + ROW_STEP);
     r.c = start_replay(pix + 2u * ROW_STEP);
     r.d = start_replay(pix + 3u * ROW_STEP);
-    r.count = subgroupBroadcast(lanes_max(max(max(r.a.last, r.b.last), max(r.c.last, r.d.last))), 0u);
     return r;
+}
+
+// The furthest last contributor of this lane's pixels in block r (local intersections before it).
+fn block_last(r: BlockReplay) -> u32 {
+    return max(max(r.a.last, r.b.last), max(r.c.last, r.d.last));
 }
 
 // Replay surfel `s` in one block (the per-subgroup variant's hit step) and add its gradient to `t`.
@@ -140,9 +142,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
     var r6 = start_block_replay(origin, 6u, sg_lane);
     var r7 = start_block_replay(origin, 7u, sg_lane);
     let range = ranges[tile];
-    let furthest = max(max(max(r0.count, r1.count), max(r2.count, r3.count)),
-                       max(max(r4.count, r5.count), max(r6.count, r7.count)));
-    let count = min(range.y - range.x, furthest);
+    // The tile's furthest last contributor bounds the walk (subgroup-uniform).
+    let furthest = max(max(max(block_last(r0), block_last(r1)), max(block_last(r2), block_last(r3))),
+                       max(max(block_last(r4), block_last(r5)), max(block_last(r6), block_last(r7))));
+    let count = min(range.y - range.x, subgroupBroadcast(lanes_max(furthest), 0u));
     for (var end = count; end > 0u; end -= min(end, SG)) {   // groups of SG, from the back
         let h0 = end - min(end, SG);
         let n = end - h0;
