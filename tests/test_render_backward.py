@@ -125,6 +125,33 @@ def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
         assert np.abs(first[k] - atomics[k]).max() <= 1e-5 * scale, k
 
 
+def test_surfel_texels_change_nothing(gpu):
+    """The tile walks read projected surfels and colours from textures (gma/render/surfel_texels.py):
+    images and gradients equal those from the buffers bit for bit, over several texture rows (5000
+    surfels: 4.9 rows of projections, 1.2 of colours) and after the textures grew for a larger scene."""
+    rast = SurfelRasterizer(gpu)
+    if not rast.use_grad_records:
+        pytest.skip("the surfel textures serve lavapipe's tile walks")
+    cam = default_camera(80, 64)
+    for n in (5000, 700):
+        scene = torch_scene(n, seed=n, spread=0.8, scale_range=(0.02, 0.12))
+        up = random_upstream(cam, seed=3, which=("color", "normal"))
+        buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+        results = []
+        for texels in (False, True):
+            rast.use_surfel_texels = texels
+            state = rast.forward(buffers, cam)
+            images = read_outputs(gpu, state)
+            g = rast.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"])
+            results.append((images, g))
+        (images_a, grads_a), (images_b, grads_b) = results
+        for k in ("color", "alpha", "normal", "depth"):
+            assert np.array_equal(getattr(images_a, k), getattr(images_b, k)), (n, k)
+        for k in NAMES:
+            assert np.array_equal(getattr(grads_a, k), getattr(grads_b, k)), (n, k)
+        assert np.abs(grads_a.means).sum() > 0
+
+
 def test_gradient_records_only_where_they_fit(gpu):
     """Records need a tile id below the key's number field and a buffer binding that holds them; a
     render beyond either (or with more than 4 channels: the plain rasterizer) falls back to atomics."""

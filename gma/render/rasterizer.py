@@ -23,6 +23,7 @@ from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
 from gma.render.layouts import render_params, tile_grid
+from gma.render.surfel_texels import SurfelTexels
 from gma.render.surfels import SurfelBuffers
 
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
@@ -59,10 +60,10 @@ class ProjectionState:
 
 @dataclass
 class RecordIndex:
-    """Where a render's backward pass writes and finds per-intersection gradient records (see
-    tile_walk_bwd.wgsl): an intersection's record lies at its emission index, record_base[surfel] + its
-    number within its surfel's list, which its tile-sorted key carries; a surfel's records are
-    consecutive."""
+    """What a render's backward pass needs to write and find per-intersection gradient records (see
+    tile_walk_bwd.wgsl): a record lies at its intersection's tile-sorted place, and the backward's slots,
+    by emission index (record_base[surfel] + the intersection's number within its surfel's list, which
+    its tile-sorted key carries), point to it, so that a surfel's slots are consecutive."""
 
     isect_keys: wgpu.GPUBuffer    # tile-sorted: tile | number << RECORD_KEY_SHIFT
     record_base: wgpu.GPUBuffer   # [N] by surfel id (written for listed surfels only)
@@ -143,7 +144,10 @@ class SurfelRasterizer:
         # (tile_walk_fwd.wgsl); tests switch it off to exercise the per-subgroup variant that other
         # subgroup sizes run. Gradient records need it.
         self.use_tile_walk = True
-        self._zeroed_records: tuple[wgpu.GPUBuffer, int] | None = None  # see _cleared_records
+        # The tile walks read the projected surfels and their colours from textures (surfel_texels.py);
+        # tests switch it off to check that the buffer reads give the same images and gradients.
+        self.use_surfel_texels = True
+        self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
 
     # -- variants -----------------------------------------------------------------------------------
@@ -316,6 +320,8 @@ class SurfelRasterizer:
                            ((tx * ty + 255) // 256, 1, 1), "bin", timer)
         else:
             encoder.clear_buffer(ranges)  # every tile is empty
+        texels = self._texels_for(defines, n)
+        defines = {**defines, "SURFEL_TEXELS": texels is not None}
         inputs = [st.params, st.projected if n else empty, surfels.colors, isect_ids, ranges, background]
         if isinstance(target, wgpu.GPUTextureView):
             raster = ctx.compute_pipeline("render/rasterize_texture.wgsl", defines)
@@ -329,8 +335,17 @@ class SurfelRasterizer:
         if subgroups:
             self._subgroup_inputs(resources, st.colors4 if n else empty,
                                   (st.pixel_rows if n else empty) if defines["TILE_WALK"] else None)
+        if texels:
+            texels.bind(encoder, resources, st.projected, st.colors4, n)
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
         return isect_ids, ranges, records
+
+    def _texels_for(self, defines: dict, n: int) -> SurfelTexels | None:
+        """The surfel textures for a rasterizer variant, or None where it reads the buffers: only the
+        tile walks (lavapipe) read textures, and only while the surfels fit them."""
+        if not (defines["TILE_WALK"] and self.use_surfel_texels and 0 < n <= self.texels.capacity):
+            return None
+        return self.texels
 
     # -- public entry points ------------------------------------------------------------------------
     def forward(self, surfels: SurfelBuffers, camera: Camera, background: np.ndarray | None = None,
@@ -457,6 +472,8 @@ class SurfelRasterizer:
         # records); with atomics each subgroup replays its own block.
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
                        GRAD_RECORDS=records is not None)
+        texels = self._texels_for(defines, n) if records is not None else None
+        defines["SURFEL_TEXELS"] = texels is not None
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
@@ -474,8 +491,12 @@ class SurfelRasterizer:
         else:
             v_colors = ctx.buffer(4 * c * n, "v_colors")
         if records:
-            resources[12] = grads = self._cleared_records(enc, state.num_isects, normal_depth)
-            resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks})
+            # Scratch (the gradients are read back before this returns). Only records that the slots
+            # point to are read, all written by this pass: no clearing; the slots are cleared.
+            resources[12] = grads = self.workspace.get("grad_records", _record_bytes(state.num_isects, normal_depth))
+            slots = self.workspace.get("record_slots", 4 * max(state.num_isects, 1))
+            enc.clear_buffer(slots, 0, 4 * max(state.num_isects, 1))
+            resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks, 22: slots})
         else:
             grads = ctx.buffer(4 * 16 * n, "v_proj")
             resources[12] = grads
@@ -483,6 +504,8 @@ class SurfelRasterizer:
                 resources[13] = v_colors
         if defines["USE_SUBGROUPS"]:
             self._subgroup_inputs(resources, state.proj.colors4)
+        if texels:
+            texels.bind(enc, resources, state.proj.projected, state.proj.colors4, n)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                               ("v_opacities", 1))]
@@ -493,6 +516,7 @@ class SurfelRasterizer:
             proj_resources[10] = v_colors
         if records:
             proj_resources[11] = records.record_base
+            proj_resources[12] = slots
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "NORMAL_DEPTH_GRADS": normal_depth, "COLORS_OUT": colors_out, "CHANNELS": c}
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
@@ -504,36 +528,12 @@ class SurfelRasterizer:
             [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
              (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
         ctx.recycler.give_back(recycled)  # read back: nothing else holds them
-        if records:
-            self._clear_records_for_next(grads, _record_bytes(state.num_isects, normal_depth))
         return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
                            colors.reshape(n, c))
 
     def _zeros(self, nbytes: int) -> wgpu.GPUBuffer:
         """A zero-filled buffer of at least ``nbytes`` that nothing writes (a missing upstream gradient)."""
         return self.workspace.get("zeros", nbytes)
-
-    def _cleared_records(self, enc, num_isects: int, normal_depth: bool) -> wgpu.GPUBuffer:
-        """Zeroed gradient records (store_record in tile_walk_bwd.wgsl). Scratch: backward reads the
-        gradients back before it returns. Cleared here only when the previous backward did not leave
-        them zeroed (see _clear_records_for_next)."""
-        nbytes = _record_bytes(num_isects, normal_depth)
-        records = self.workspace.get("grad_records", nbytes)
-        zeroed = self._zeroed_records
-        if zeroed is None or zeroed[0] is not records or zeroed[1] < nbytes:
-            enc.clear_buffer(records, 0, nbytes)
-        self._zeroed_records = None  # this backward writes them
-        return records
-
-    def _clear_records_for_next(self, records: wgpu.GPUBuffer, nbytes: int) -> None:
-        """Zero the records the backward just used, in a submission of its own after the gradients were
-        read: the driver clears them while the host turns the gradients into tensors and the next step
-        begins, instead of between the next backward's submission and its rasterizer (on lavapipe a
-        14 MB clear on the queue thread, 0.7-2.9 ms, standard scene)."""
-        enc = self.ctx.device.create_command_encoder()
-        enc.clear_buffer(records, 0, nbytes)
-        self.ctx.submit(enc)
-        self._zeroed_records = (records, nbytes)
 
     def backward_defines(self, channels: int) -> dict:
         defines = self.raster_defines(channels)

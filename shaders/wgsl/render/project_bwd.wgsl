@@ -3,10 +3,11 @@
 // and scales, by recomputing the forward projection (cheaper than storing its intermediates).
 // Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
 // the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
-// Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection (store_record in
-// tile_walk_bwd.wgsl), at its emission index; a surfel's lie at [record_base, record_base + tile count)
-// and are summed here in that order, the same on every run, into the projection and colour gradients
-// (NORMAL_DEPTH_GRADS says which record layout).
+// Define GRAD_RECORDS: the rasterizer wrote one gradient record per intersection that a pixel took
+// (store_record in tile_walk_bwd.wgsl), at its tile-sorted place; a surfel's record slots (that place
+// + 1, or 0: no record) lie at [record_base, record_base + tile count), and its records are summed here
+// in that order, the same on every run, into the projection and colour gradients (NORMAL_DEPTH_GRADS
+// says which record layout).
 // COLORS_OUT: this pass writes v_colors (with COLOR_IN_PROJ or GRAD_RECORDS).
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
@@ -19,6 +20,7 @@
 #if GRAD_RECORDS
 @group(0) @binding(5) var<storage, read> records: array<vec4<f32>>;  // [isects, RECORD_VEC4S]
 @group(0) @binding(11) var<storage, read> record_base: array<u32>;   // [N] by surfel id
+@group(0) @binding(12) var<storage, read> record_slots: array<u32>;  // [isects] by emission index (see above)
 #else
 @group(0) @binding(5) var<storage, read> v_proj: array<f32>;       // [N, 16] (layout: grad_atomics.wgsl)
 #endif
@@ -64,13 +66,17 @@ fn raster_grads(i: u32) -> RasterGrads {
     var s3 = vec4<f32>(0.0);
     var s4 = vec4<f32>(0.0);
     for (var e = first; e < end; e++) {
-        let r = e * RECORD_VEC4S;
-        s0 += records[r];
-        s1 += records[r + 1u];
-        s2 += records[r + 2u];
-        s3 += records[r + 3u];
+        // Every lane loads (an unwritten record's place clamped to 0) and selects: no divergent branch,
+        // and select keeps whatever a stale record holds, NaN included, out of the sums.
+        let slot = record_slots[e];
+        let written = slot != 0u;
+        let r = (max(slot, 1u) - 1u) * RECORD_VEC4S;
+        s0 += select(vec4<f32>(0.0), records[r], written);
+        s1 += select(vec4<f32>(0.0), records[r + 1u], written);
+        s2 += select(vec4<f32>(0.0), records[r + 2u], written);
+        s3 += select(vec4<f32>(0.0), records[r + 3u], written);
 #if NORMAL_DEPTH_GRADS
-        s4 += records[r + 4u];
+        s4 += select(vec4<f32>(0.0), records[r + 4u], written);
 #endif
     }
     var g: RasterGrads;

@@ -198,8 +198,9 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 }
 
 #if GRAD_RECORDS
-// Gradient records: one per intersection, at its emission index (a surfel's records are consecutive),
-// RECORD_VEC2S vec2s each, zeroed before the pass and summed per surfel by project_bwd.wgsl. The tile
+// Gradient records: one per intersection that some pixel took, at its place in the tile-sorted list
+// (found per surfel through the slots, see tile_walk_bwd.wgsl), RECORD_VEC2S vec2s each, summed per
+// surfel by project_bwd.wgsl. The tile
 // walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each record once, from the one
 // subgroup that replays the tile: only on lavapipe (SurfelRasterizer.use_grad_records; GPUs, whose
 // subgroups run concurrently, keep per-surfel atomics). History on the standard scene (100k surfels):
@@ -210,8 +211,10 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 // at the emission index then made this pass ~12 ms slower (scattered read-modify-writes). Written once
 // per intersection by the tile walk, they go to the emission index: project_bwd reads each surfel's in
 // order and needs no slot list (standard scene, six alternating processes: project_bwd 0.88x by the
-// median, this pass within noise). The sums run in a fixed order, so the gradients are the same on
-// every run, also under load.
+// median, this pass within noise). Once the walk had become faster, those scattered stores were a
+// quarter of it, and records went back to the tile-sorted place, with slots written by the walk itself
+// (tile_walk_bwd.wgsl). The sums run in a fixed order, so the gradients are the same on every run, also
+// under load.
 @group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]
 
 #if NORMAL_DEPTH_GRADS

@@ -19,6 +19,7 @@
 @group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR)
 #if TILE_WALK
 @group(0) @binding(18) var<storage, read> pixel_rows: array<u32>;              // [N] see tile_quads
+#include "render/surfel_texels.wgsl"
 #endif
 // Per subgroup (row sg_id * (BATCH + SG)): the batch's intersections whose block mask meets the
 // subgroup's blocks, each as its surfel id << 8 | its slot in the batch (hit_entry), then up to SG - 1

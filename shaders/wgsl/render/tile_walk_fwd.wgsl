@@ -135,8 +135,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
             let n = min(SG, m - h);
             let mine_id = isect_ids[base + h + min(sg_lane, n - 1u)];
             let mine_sid = mine_id & SURFEL_ID_MASK;
-            let mine = projected[mine_sid];
-            let mine_col = colors4[mine_sid];
+            let mine = load_projected(mine_sid);
+            let mine_col = load_color4(mine_sid);
             let mine_quads = tile_quads(pixel_rows[mine_sid], origin.y, mine_id >> SURFEL_ID_BITS);
             let open_quads = block_nibbles(open);
 #if USED_BLOCKS
