@@ -126,8 +126,9 @@ def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
 
 
 def test_surfel_texels_change_nothing(gpu):
-    """The tile walks read projected surfels and colours from textures (gma/render/surfel_texels.py):
-    images and gradients equal those from the buffers bit for bit, over several texture rows (5000
+    """The tile walks read projected surfels and colours, and project_bwd the gradient records, from
+    texture copies (gma/render/surfel_texels.py): images and gradients equal those from the buffers bit
+    for bit, over several texture rows (5000
     surfels: 4.9 rows of projections, 1.2 of colours) and after the textures grew for a larger scene."""
     rast = SurfelRasterizer(gpu)
     if not rast.use_grad_records:

@@ -517,8 +517,15 @@ class SurfelRasterizer:
         if records:
             proj_resources[11] = records.record_base
             proj_resources[12] = slots
+        # project_bwd reads the records from a texture copy too (scattered reads; see surfel_texels.py).
+        record_texels = _record_bytes(state.num_isects, normal_depth) // 16
+        use_texels = records is not None and self.use_surfel_texels and record_texels <= self.texels.max_texels
+        if use_texels:
+            del proj_resources[5]
+            proj_resources[13] = self.texels.copy(enc, "records", grads, record_texels)
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
-                        "NORMAL_DEPTH_GRADS": normal_depth, "COLORS_OUT": colors_out, "CHANNELS": c}
+                        "RECORD_TEXELS": use_texels, "NORMAL_DEPTH_GRADS": normal_depth,
+                        "COLORS_OUT": colors_out, "CHANNELS": c}
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
         self._dispatch(enc, proj, proj_resources, ((n + 255) // 256, 1, 1), "project_bwd", timer)
         if timer:

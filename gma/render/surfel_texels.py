@@ -12,7 +12,9 @@ array<vec4<f32>> (random indices: 2.6x), where scalar reads gained nothing (r32f
 Projection keeps writing the buffers (the backward, other variants and GPUs read those); each rasterizer
 pass first copies them into these textures (a memcpy on lavapipe: ~0.5 ms for 100k surfels). So the
 textures are scratch of one pass: a backward copies again from its forward state's buffers, and renders
-in between cannot disturb it (the queue runs copies and passes in order).
+in between cannot disturb it (the queue runs copies and passes in order). The backward's gradient
+records go the same way before project_bwd sums them (scattered reads, tile order): project_bwd 0.81x
+(standard scene, one process, 12 rounds), for a 14 MB copy.
 """
 
 from __future__ import annotations
@@ -28,44 +30,43 @@ PROJECTED_BINDING, COLORS_BINDING = 20, 21   # replace the buffers at 1 (project
 
 
 class SurfelTexels:
-    """Grow-only textures holding the first surfels' projections and colours for one rasterizer pass."""
+    """Grow-only rgba32float textures holding copies of vec4 buffers for one pass: texel t of a copy at
+    (t % TEXEL_ROW, t // TEXEL_ROW), so that a surfel's projection row k is texel 4 i + k."""
 
     def __init__(self, ctx):
         self.ctx = ctx
         self.max_rows = int(ctx.limits["max-texture-dimension-2d"])
-        # Surfels that fit (the colours' texture is 4x shorter); 0 where a row does not fit.
-        self.capacity = self.max_rows * (TEXEL_ROW // PROJECTED_TEXELS) if TEXEL_ROW <= self.max_rows else 0
-        self._textures: dict[int, wgpu.GPUTexture] = {}
+        # Texels a copy can hold (0 where a row does not fit), and surfels whose projections fit.
+        self.max_texels = self.max_rows * TEXEL_ROW if TEXEL_ROW <= self.max_rows else 0
+        self.capacity = self.max_texels // PROJECTED_TEXELS
+        self._textures: dict[str, wgpu.GPUTexture] = {}
 
     def bind(self, encoder, resources: dict, projected: wgpu.GPUBuffer, colors4: wgpu.GPUBuffer, n: int) -> None:
         """Encode the copies of ``n`` surfels' projections and colours into the textures and bind them in
         ``resources`` in place of the buffers (whose bindings the texel variant does not declare)."""
-        views = [self._copy(encoder, buf, per_item, n) for buf, per_item in
-                 ((projected, PROJECTED_TEXELS), (colors4, COLOR_TEXELS))]
         del resources[1], resources[15]
-        resources[PROJECTED_BINDING], resources[COLORS_BINDING] = views
+        resources[PROJECTED_BINDING] = self.copy(encoder, "projected", projected, PROJECTED_TEXELS * n)
+        resources[COLORS_BINDING] = self.copy(encoder, "colors", colors4, COLOR_TEXELS * n)
 
-    def _copy(self, encoder, buf: wgpu.GPUBuffer, per_item: int, n: int) -> wgpu.GPUTextureView:
-        per_row = TEXEL_ROW // per_item
-        rows = -(-n // per_row)
-        tex = self._texture(per_item, rows)
-        full = n // per_row
+    def copy(self, encoder, name: str, buf: wgpu.GPUBuffer, texels: int) -> wgpu.GPUTextureView:
+        """Encode a copy of the first ``texels`` vec4s of ``buf`` into texture ``name`` (at most
+        ``max_texels``), and return its view."""
+        tex = self._texture(name, -(-texels // TEXEL_ROW))
+        full, rest = divmod(texels, TEXEL_ROW)
         row_bytes = 16 * TEXEL_ROW
         if full:
             encoder.copy_buffer_to_texture({"buffer": buf, "offset": 0, "bytes_per_row": row_bytes,
                                             "rows_per_image": full}, {"texture": tex}, (TEXEL_ROW, full, 1))
-        rest = n - full * per_row
         if rest:   # the last, partial row
             encoder.copy_buffer_to_texture({"buffer": buf, "offset": full * row_bytes, "bytes_per_row": row_bytes},
-                                           {"texture": tex, "origin": (0, full, 0)}, (rest * per_item, 1, 1))
+                                           {"texture": tex, "origin": (0, full, 0)}, (rest, 1, 1))
         return tex.create_view()
 
-    def _texture(self, per_item: int, rows: int) -> wgpu.GPUTexture:
-        tex = self._textures.get(per_item)
+    def _texture(self, name: str, rows: int) -> wgpu.GPUTexture:
+        tex = self._textures.get(name)
         if tex is None or tex.size[1] < rows:
             grown = rows if tex is None else min(self.max_rows, max(rows, tex.size[1] * 5 // 4))
-            tex = self._textures[per_item] = self.ctx.device.create_texture(
-                label=f"surfel_texels.{per_item}", size=(TEXEL_ROW, grown, 1),
-                format=wgpu.TextureFormat.rgba32float,
+            tex = self._textures[name] = self.ctx.device.create_texture(
+                label=f"texels.{name}", size=(TEXEL_ROW, grown, 1), format=wgpu.TextureFormat.rgba32float,
                 usage=wgpu.TextureUsage.COPY_DST | wgpu.TextureUsage.STORAGE_BINDING)
         return tex

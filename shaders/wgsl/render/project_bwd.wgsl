@@ -18,7 +18,19 @@
 @group(0) @binding(3) var<storage, read> scales: array<f32>;       // [N, 2]
 @group(0) @binding(4) var<storage, read> tile_counts: array<u32>;  // [N], 0 when culled
 #if GRAD_RECORDS
+#if RECORD_TEXELS
+// The records copied into a texture (texel t at (t % 4096, t / 4096); gma/render/surfel_texels.py):
+// on lavapipe a texel fetch gathers for all lanes at once.
+@group(0) @binding(13) var record_texels: texture_storage_2d<rgba32float, read>;
+fn load_record(t: u32) -> vec4<f32> {
+    return textureLoad(record_texels, vec2<u32>(t & 4095u, t >> 12u));
+}
+#else
 @group(0) @binding(5) var<storage, read> records: array<vec4<f32>>;  // [isects, RECORD_VEC4S]
+fn load_record(t: u32) -> vec4<f32> {
+    return records[t];
+}
+#endif
 @group(0) @binding(11) var<storage, read> record_base: array<u32>;   // [N] by surfel id
 @group(0) @binding(12) var<storage, read> record_slots: array<u32>;  // [isects] by emission index (see above)
 #else
@@ -71,12 +83,12 @@ fn raster_grads(i: u32) -> RasterGrads {
         let slot = record_slots[e];
         let written = slot != 0u;
         let r = (max(slot, 1u) - 1u) * RECORD_VEC4S;
-        s0 += select(vec4<f32>(0.0), records[r], written);
-        s1 += select(vec4<f32>(0.0), records[r + 1u], written);
-        s2 += select(vec4<f32>(0.0), records[r + 2u], written);
-        s3 += select(vec4<f32>(0.0), records[r + 3u], written);
+        s0 += select(vec4<f32>(0.0), load_record(r), written);
+        s1 += select(vec4<f32>(0.0), load_record(r + 1u), written);
+        s2 += select(vec4<f32>(0.0), load_record(r + 2u), written);
+        s3 += select(vec4<f32>(0.0), load_record(r + 3u), written);
 #if NORMAL_DEPTH_GRADS
-        s4 += select(vec4<f32>(0.0), records[r + 4u], written);
+        s4 += select(vec4<f32>(0.0), load_record(r + 4u), written);
 #endif
     }
     var g: RasterGrads;
