@@ -117,3 +117,50 @@ def test_buffer_freed_while_the_cache_holds_its_lock_does_not_deadlock():
     worker.join(10)
     assert not worker.is_alive(), "the callback waited for the lock its own thread held"
     assert len(cache) == 0
+
+
+TEXEL_SUM = """
+@group(0) @binding(0) var src: texture_storage_2d<rgba32float, read>;
+@group(0) @binding(1) var<storage, read_write> dst: array<f32>;
+@compute @workgroup_size(4)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let t = textureLoad(src, vec2<u32>(gid.x, 0u));
+    dst[gid.x] = t.x + t.y + t.z + t.w;
+}
+"""
+
+
+def test_texture_views_reuse_bind_groups_and_never_a_dead_views(gpu):
+    """A texture view kept alive (the rasterizer's texel copies keep one per texture) finds its bind group
+    again; views made anew, with a dead one's id, get fresh ones that bind the new texture."""
+    import wgpu
+
+    module = gpu.device.create_shader_module(code=TEXEL_SUM)
+    pipeline = gpu.device.create_compute_pipeline(layout="auto", compute={"module": module, "entry_point": "main"})
+    dst = gpu.buffer(16, "dst")
+
+    def texel_sums(view):
+        bind = gpu.bind_group(pipeline, [view, dst])
+        enc = gpu.device.create_command_encoder()
+        cp = enc.begin_compute_pass()
+        cp.set_pipeline(pipeline)
+        cp.set_bind_group(0, bind)
+        cp.dispatch_workgroups(1)
+        cp.end()
+        gpu.submit(enc)
+        return bind, gpu.read(dst, np.float32, 4)
+
+    for k in range(6):
+        tex = gpu.device.create_texture(size=(4, 1, 1), format=wgpu.TextureFormat.rgba32float,
+                                        usage=wgpu.TextureUsage.STORAGE_BINDING | wgpu.TextureUsage.COPY_DST)
+        gpu.device.queue.write_texture({"texture": tex}, np.full((4, 4), float(k), np.float32).tobytes(),
+                                       {"bytes_per_row": 64}, (4, 1, 1))
+        view = tex.create_view()
+        hits = gpu.bind_groups.hits
+        first, out = texel_sums(view)
+        again, out_again = texel_sums(view)
+        assert again is first and gpu.bind_groups.hits == hits + 1
+        np.testing.assert_array_equal(out, np.full(4, 4.0 * k))
+        np.testing.assert_array_equal(out_again, out)
+        del tex, view, first, again
+        gc.collect()

@@ -1,10 +1,11 @@
-"""Bind groups made once and reused while their buffers live.
+"""Bind groups made once and reused while their buffers (and texture views) live.
 
 Creating a bind group costs wgpu-native ~0.15 ms of validation and Python struct building; the public
 ``rasterize`` call made ~29 per forward+backward step (standard scene, lavapipe: ~4 ms of a ~180 ms step).
 With recycled buffers (gma/gpu/recycle.py) a steady loop binds the same buffers to the same pipelines
 step after step, so a bind group is looked up by (pipeline, group, every binding's buffer, offset and
-size) instead of being made again.
+size) instead of being made again. A texture view is keyed like a buffer (offset and size 0): the
+rasterizer keeps one view per texel texture (gma/render/surfel_texels.py).
 
 An entry must never serve a buffer it was not made with: Python may give a dead buffer's ``id`` to a new
 one. So an entry keeps weak references to its buffers and a lookup checks that each still refers to the

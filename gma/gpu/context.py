@@ -154,7 +154,8 @@ class GpuContext:
     def bind_group(self, pipeline: wgpu.GPUComputePipeline, resources: list | dict, group: int = 0):
         """A bind group binding ``resources[i]`` at ``@binding(i)`` (a list), or each ``{binding:
         resource}`` (a dict). A resource is a buffer, a (buffer, offset, size) range, or a texture view.
-        Groups of buffers only are made once and reused while those buffers live (gma/gpu/bind_groups.py)."""
+        Groups of buffers and views are made once and reused while those live (gma/gpu/bind_groups.py);
+        groups with anything else (samplers) are made every time."""
         items = resources.items() if isinstance(resources, dict) else enumerate(resources)
         bindings, others = [], []
         for i, b in items:
@@ -162,16 +163,18 @@ class GpuContext:
                 bindings.append((i, *b))
             elif isinstance(b, wgpu.GPUBuffer):
                 bindings.append((i, b, 0, b.size))
+            elif isinstance(b, wgpu.GPUTextureView):
+                bindings.append((i, b, 0, 0))   # a view binds whole: no range
             else:
                 others.append((i, b))
 
         def create():
-            entries = [{"binding": i, "resource": {"buffer": buf, "offset": offset, "size": size}}
-                       for i, buf, offset, size in bindings]
+            entries = [{"binding": i, "resource": {"buffer": res, "offset": offset, "size": size}
+                        if isinstance(res, wgpu.GPUBuffer) else res} for i, res, offset, size in bindings]
             entries += [{"binding": i, "resource": res} for i, res in others]
             return self.device.create_bind_group(layout=pipeline.get_bind_group_layout(group), entries=entries)
 
-        if others:  # texture views and samplers are made per frame: nothing to reuse
+        if others:
             return create()
         return self.bind_groups.get(pipeline, group, bindings, create)
 
