@@ -474,6 +474,10 @@ class SurfelRasterizer:
                        GRAD_RECORDS=records is not None)
         texels = self._texels_for(defines, n) if records is not None else None
         defines["SURFEL_TEXELS"] = texels is not None
+        # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
+        record_texels = _record_bytes(state.num_isects, normal_depth) // 16
+        defines["RECORD_TEXELS"] = use_record_texels = (records is not None and self.use_surfel_texels
+                                                        and record_texels <= self.texels.max_texels)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
@@ -493,7 +497,12 @@ class SurfelRasterizer:
         if records:
             # Scratch (the gradients are read back before this returns). Only records that the slots
             # point to are read, all written by this pass: no clearing; the slots are cleared.
-            resources[12] = grads = self.workspace.get("grad_records", _record_bytes(state.num_isects, normal_depth))
+            if use_record_texels:
+                grads = self.texels.view("records", record_texels)
+                resources[23] = grads
+            else:
+                resources[12] = grads = self.workspace.get("grad_records", _record_bytes(state.num_isects,
+                                                                                          normal_depth))
             slots = self.workspace.get("record_slots", 4 * max(state.num_isects, 1))
             enc.clear_buffer(slots, 0, 4 * max(state.num_isects, 1))
             resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks, 22: slots})
@@ -517,14 +526,11 @@ class SurfelRasterizer:
         if records:
             proj_resources[11] = records.record_base
             proj_resources[12] = slots
-        # project_bwd reads the records from a texture copy too (scattered reads; see surfel_texels.py).
-        record_texels = _record_bytes(state.num_isects, normal_depth) // 16
-        use_texels = records is not None and self.use_surfel_texels and record_texels <= self.texels.max_texels
-        if use_texels:
+        if use_record_texels:
             del proj_resources[5]
-            proj_resources[13] = self.texels.copy(enc, "records", grads, record_texels)
+            proj_resources[13] = grads
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
-                        "RECORD_TEXELS": use_texels, "NORMAL_DEPTH_GRADS": normal_depth,
+                        "RECORD_TEXELS": use_record_texels, "NORMAL_DEPTH_GRADS": normal_depth,
                         "COLORS_OUT": colors_out, "CHANNELS": c}
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
         self._dispatch(enc, proj, proj_resources, ((n + 255) // 256, 1, 1), "project_bwd", timer)

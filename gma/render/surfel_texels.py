@@ -12,9 +12,11 @@ array<vec4<f32>> (random indices: 2.6x), where scalar reads gained nothing (r32f
 Projection keeps writing the buffers (the backward, other variants and GPUs read those); each rasterizer
 pass first copies them into these textures (a memcpy on lavapipe: ~0.5 ms for 100k surfels). So the
 textures are scratch of one pass: a backward copies again from its forward state's buffers, and renders
-in between cannot disturb it (the queue runs copies and passes in order). The backward's gradient
-records go the same way before project_bwd sums them (scattered reads, tile order): project_bwd 0.81x
-(standard scene, one process, 12 rounds), for a 14 MB copy.
+in between cannot disturb it (the queue runs copies and passes in order). The backward's tile walk
+writes its gradient records straight into such a texture, which project_bwd reads (scattered reads, in
+tile order). Standard scene, one process, 12-14 rounds: from a buffer, project_bwd 1.23x as long; from a
+copy of that buffer, project_bwd 0.85x of the direct texture's (its reads hit a freshly copied 14 MB)
+but the copy took ~3 ms of the step: forward+backward 1.011x.
 """
 
 from __future__ import annotations
@@ -49,6 +51,10 @@ class SurfelTexels:
         del resources[1], resources[15]
         resources[PROJECTED_BINDING] = self.copy(encoder, "projected", projected, PROJECTED_TEXELS * n)
         resources[COLORS_BINDING] = self.copy(encoder, "colors", colors4, COLOR_TEXELS * n)
+
+    def view(self, name: str, texels: int) -> wgpu.GPUTextureView:
+        """Texture ``name`` holding at least ``texels`` (at most ``max_texels``), for a pass to write."""
+        return self._texture(name, -(-texels // TEXEL_ROW))[1]
 
     def copy(self, encoder, name: str, buf: wgpu.GPUBuffer, texels: int) -> wgpu.GPUTextureView:
         """Encode a copy of the first ``texels`` vec4s of ``buf`` into texture ``name`` (at most

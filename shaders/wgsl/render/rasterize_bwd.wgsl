@@ -215,7 +215,13 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 // quarter of it, and records went back to the tile-sorted place, with slots written by the walk itself
 // (tile_walk_bwd.wgsl). The sums run in a fixed order, so the gradients are the same on every run, also
 // under load.
+#if RECORD_TEXELS
+// The records as rgba32float texels, RECORD_VEC2S / 2 per record, texel t at (t % 4096, t / 4096)
+// (gma/render/surfel_texels.py): project_bwd's scattered reads gather for all lanes at once.
+@group(0) @binding(23) var record_texels: texture_storage_2d<rgba32float, write>;
+#else
 @group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]
+#endif
 
 #if NORMAL_DEPTH_GRADS
 const RECORD_VEC2S: u32 = 10u;   // V0-15 as below, then the colours 0-3

@@ -124,13 +124,36 @@ fn store_record(rec: u32, s: ProjectedSurfel, t: HitTotals, sg_lane: u32) {
 #else
     let tail = t.e;   // the colour gradients, in the normal and depth slots
 #endif
-    records[rec * RECORD_VEC2S + sg_lane] = scatter16(a, b, c, tail, sg_lane);
+    let pair = scatter16(a, b, c, tail, sg_lane);
 #if NORMAL_DEPTH_GRADS
     let e_total = scatter_colors8(t.e, sg_lane);   // lanes 0, 2, 4, 6: colours 0-3
+#endif
+#if RECORD_TEXELS
+    // Texel j of the record is (V[2j], V[2j + 8], V[2j + 1], V[2j + 9]): lanes 2j and 2j + 1's pairs.
+    // Lanes 0-3 store texels 0-3 (and, with normal and depth gradients, lane 4 the colours' texel).
+    let j = sg_lane & 3u;
+    var texel = vec4<f32>(subgroupShuffle(pair, 2u * j), subgroupShuffle(pair, 2u * j + 1u));
+    var count = 4u;
+#if NORMAL_DEPTH_GRADS
+    // All four colours, zeros past the channels (the texture is never cleared).
+    let colours = vec4<f32>(subgroupShuffle(e_total, 0u), subgroupShuffle(e_total, 2u),
+                            subgroupShuffle(e_total, 4u), subgroupShuffle(e_total, 6u));
+    texel = select(texel, select(vec4<f32>(0.0), colours, vec4<u32>(0u, 1u, 2u, 3u) < vec4<u32>(CHANNELS)),
+                   sg_lane == 4u);
+    count = 5u;
+#endif
+    if sg_lane < count {
+        let at = rec * (RECORD_VEC2S / 2u) + sg_lane;
+        textureStore(record_texels, vec2<u32>(at & 4095u, at >> 12u), texel);
+    }
+#else
+    records[rec * RECORD_VEC2S + sg_lane] = pair;
+#if NORMAL_DEPTH_GRADS
     let ch = sg_lane >> 1u;
     if (sg_lane & 1u) == 0u {   // all four, zeros past the channels: the records are not cleared
         records[rec * RECORD_VEC2S + 8u + (ch >> 1u)][ch & 1u] = select(0.0, e_total, ch < CHANNELS);
     }
+#endif
 #endif
 }
 
