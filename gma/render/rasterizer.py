@@ -144,8 +144,9 @@ class SurfelRasterizer:
         # (tile_walk_fwd.wgsl); tests switch it off to exercise the per-subgroup variant that other
         # subgroup sizes run. Gradient records need it.
         self.use_tile_walk = True
-        # The tile walks read the projected surfels and their colours from textures (surfel_texels.py);
-        # tests switch it off to check that the buffer reads give the same images and gradients.
+        # The tile walks read the projected surfels and their colours, and project_bwd the backward's
+        # gradient records, from textures (surfel_texels.py), where they fit; tests switch it off to check
+        # that the buffer reads give the same images and gradients.
         self.use_surfel_texels = True
         self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
