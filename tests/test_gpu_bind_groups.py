@@ -23,15 +23,21 @@ def _pipeline(gpu):
     return gpu.device.create_compute_pipeline(layout="auto", compute={"module": module, "entry_point": "main"})
 
 
-def _double(gpu, pipeline, src, dst, n):
-    bind = gpu.bind_group(pipeline, [src, dst])
+def _dispatch(gpu, pipeline, resources, groups):
+    """Run ``pipeline`` over ``groups`` workgroups with ``resources`` bound; returns the bind group."""
+    bind = gpu.bind_group(pipeline, resources)
     enc = gpu.device.create_command_encoder()
     cp = enc.begin_compute_pass()
     cp.set_pipeline(pipeline)
     cp.set_bind_group(0, bind)
-    cp.dispatch_workgroups((n + 63) // 64)
+    cp.dispatch_workgroups(groups)
     cp.end()
     gpu.submit(enc)
+    return bind
+
+
+def _double(gpu, pipeline, src, dst, n):
+    bind = _dispatch(gpu, pipeline, [src, dst], (n + 63) // 64)
     return bind, gpu.read(dst, np.float32, n)
 
 
@@ -140,14 +146,7 @@ def test_texture_views_reuse_bind_groups_and_never_a_dead_views(gpu):
     dst = gpu.buffer(16, "dst")
 
     def texel_sums(view):
-        bind = gpu.bind_group(pipeline, [view, dst])
-        enc = gpu.device.create_command_encoder()
-        cp = enc.begin_compute_pass()
-        cp.set_pipeline(pipeline)
-        cp.set_bind_group(0, bind)
-        cp.dispatch_workgroups(1)
-        cp.end()
-        gpu.submit(enc)
+        bind = _dispatch(gpu, pipeline, [view, dst], 1)
         return bind, gpu.read(dst, np.float32, 4)
 
     for k in range(6):
