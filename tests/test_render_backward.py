@@ -12,6 +12,8 @@ and those within 5e-2 * max.
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 import torch
@@ -156,6 +158,38 @@ def test_surfel_texels_change_nothing(gpu):
             for k in NAMES:
                 assert np.array_equal(getattr(grads_a, k), getattr(grads_b, k)), (n, k)
         assert np.abs(grads_a.means).sum() > 0
+
+
+def test_interleaved_renders_keep_their_own_texels(gpu):
+    """A replayed render's surfel textures are its state's (TexelLease) until the state is gone: renders
+    of other scenes between a forward and its backward change nothing, and given-back textures serve
+    later renders."""
+    rast = SurfelRasterizer(gpu)
+    cam = default_camera(64, 48)
+    scenes = [torch_scene(n, seed=40 + n, spread=0.8, scale_range=(0.02, 0.12)) for n in (900, 1500)]
+    buffers = [SurfelBuffers.from_arrays(gpu, *(sc[k].numpy() for k in NAMES)) for sc in scenes]
+    up = random_upstream(cam, seed=5, which=("color",))
+
+    def grads(state, b):
+        g = rast.backward(state, b, up["color"], None, None, None)
+        return [getattr(g, k).copy() for k in NAMES]
+
+    alone = [grads(rast.forward(b, cam), b) for b in buffers]
+    first, second = rast.forward(buffers[0], cam), rast.forward(buffers[1], cam)
+    rast.forward(buffers[1], cam, replay=False)   # a viewer-style render in between
+    if rast.use_grad_records:
+        assert first.texel_lease is not None and first.texel_lease is not second.texel_lease
+    for got, want in ((grads(second, buffers[1]), alone[1]), (grads(first, buffers[0]), alone[0])):
+        for name, a, b in zip(NAMES, got, want):
+            assert np.array_equal(a, b), name
+    leased = [first.texel_lease, second.texel_lease]
+    del first, second
+    gc.collect()
+    again = rast.forward(buffers[0], cam)
+    if rast.use_grad_records:   # a given-back lease serves it
+        assert any(again.texel_lease is held for held in leased)
+    for name, a, b in zip(NAMES, grads(again, buffers[0]), alone[0]):
+        assert np.array_equal(a, b), name
 
 
 def test_gradient_records_only_where_they_fit(gpu):

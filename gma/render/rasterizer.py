@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import os
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -23,7 +24,7 @@ from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
 from gma.render.layouts import render_params, tile_grid
-from gma.render.surfel_texels import SurfelTexels
+from gma.render.surfel_texels import SurfelTexels, TexelLease
 from gma.render.surfels import SurfelBuffers
 
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
@@ -90,6 +91,7 @@ class ForwardState:
     last: wgpu.GPUBuffer | None     # [H, W] contributors per pixel (u32)
     records: RecordIndex | None = None  # the backward sums gradient records (else per-surfel atomics)
     host_images: ImageOutputs | None = None  # read with the render's counts (forward(read_images=True))
+    texel_lease: TexelLease | None = None  # the tile walks' surfel textures of this render (surfel_texels.py)
 
 
 def _record_bytes(num_isects: int, normal_depth: bool) -> int:
@@ -336,10 +338,9 @@ class SurfelRasterizer:
         if subgroups:
             self._subgroup_inputs(resources, st.colors4 if n else empty,
                                   (st.pixel_rows if n else empty) if defines["TILE_WALK"] else None)
-        if texels:
-            texels.bind(encoder, resources, st.projected, st.colors4, n)
+        lease = texels.bind(encoder, resources, st.projected, st.colors4, n, lease=replay) if texels else None
         self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
-        return isect_ids, ranges, records
+        return isect_ids, ranges, records, lease
 
     def _texels_for(self, defines: dict, n: int) -> SurfelTexels | None:
         """The surfel textures for a rasterizer variant, or None where it reads the buffers: only the
@@ -401,16 +402,22 @@ class SurfelRasterizer:
         if num_isects > capacity or needed_bits > key_bits:
             if timer:  # report the passes that ran last
                 timer.names = timed_projection
+            if lists[3] is not None:   # the texels' lease of the render that is done again
+                self.texels.give_back(lists[3])
             lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
                                              images + replayed, timer)
             host = ctx.read_many(image_reads)
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
-        isect_ids, ranges, records = lists
+        isect_ids, ranges, records, lease = lists
         state = ForwardState(camera, n, c, num_isects, st, isect_ids, ranges, background_buf, *images,
                              *(replayed or (None, None)), records=records,
-                             host_images=_images_from(host, camera, c) if read_images else None)
+                             host_images=_images_from(host, camera, c) if read_images else None,
+                             texel_lease=lease)
+        if lease is not None:   # the backward binds them; later renders get them once the state is gone
+            done = weakref.finalize(state, self.texels.give_back, lease)
+            done.atexit = False
         if replay:
             # Its buffers serve later renders once the state is gone (a training loop then allocates
             # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
@@ -514,7 +521,9 @@ class SurfelRasterizer:
                 resources[13] = v_colors
         if defines["USE_SUBGROUPS"]:
             self._subgroup_inputs(resources, state.proj.colors4)
-        if texels:
+        if texels and state.texel_lease is not None:   # the forward's copies, as they are
+            texels.bind_lease(resources, state.texel_lease)
+        elif texels:
             texels.bind(enc, resources, state.proj.projected, state.proj.colors4, n)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),

@@ -10,9 +10,10 @@ array<vec4<f32>> (random indices: 2.6x), where scalar reads gained nothing (r32f
 0.86-0.89x, images and gradients bit-identical.
 
 Projection keeps writing the buffers (the backward, other variants and GPUs read those); each rasterizer
-pass first copies them into these textures (a memcpy on lavapipe: ~0.5 ms for 100k surfels). So the
-textures are scratch of one pass: a backward copies again from its forward state's buffers, and renders
-in between cannot disturb it (the queue runs copies and passes in order). The backward's tile walk
+pass first copies them into textures (a memcpy on lavapipe: ~1.5 ms of the GPU's time for 100k surfels).
+A render the backward will replay copies into textures leased to its state (TexelLease), which its
+backward binds as they are; other renders copy into scratch textures of one pass (the queue runs copies
+and passes in order, so renders in between cannot disturb a pass). The backward's tile walk
 writes its gradient records straight into such a texture, which project_bwd reads (scattered reads, in
 tile order). Standard scene, one process, 12-14 rounds: from a buffer, project_bwd 1.23x as long; from a
 copy of that buffer, project_bwd 0.85x of the direct texture's (its reads hit a freshly copied 14 MB)
@@ -20,6 +21,9 @@ but the copy took ~3 ms of the step: forward+backward 1.011x.
 """
 
 from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
 
 import wgpu
 
@@ -29,6 +33,19 @@ TEXEL_ROW = 4096
 PROJECTED_TEXELS = 4
 COLOR_TEXELS = 1
 PROJECTED_BINDING, COLORS_BINDING = 20, 21   # replace the buffers at 1 (projected) and 15 (colors4)
+
+
+@dataclass
+class TexelLease:
+    """Textures holding one forward render's surfel projections and colours (views included), for its
+    backward to bind without copying again; given back when the render's state is collected."""
+
+    projected: tuple[wgpu.GPUTexture, wgpu.GPUTextureView]
+    colors: tuple[wgpu.GPUTexture, wgpu.GPUTextureView]
+    surfels: int   # how many surfels they hold at most
+
+
+KEEP_LEASES = 4   # given-back leases kept for reuse (a training loop holds one state at a time)
 
 
 class SurfelTexels:
@@ -44,13 +61,48 @@ class SurfelTexels:
         # name -> (texture, its view): one view per texture, so that bind groups with it are reused
         # (a view cost ~1 ms to make on lavapipe, and a bind group with a fresh view ~0.1 ms more).
         self._textures: dict[str, tuple[wgpu.GPUTexture, wgpu.GPUTextureView]] = {}
+        # Leases given back (give_back may run inside garbage collection, on any thread: it only appends).
+        self._free_leases: list[TexelLease] = []
+        self._lock = threading.Lock()
 
-    def bind(self, encoder, resources: dict, projected: wgpu.GPUBuffer, colors4: wgpu.GPUBuffer, n: int) -> None:
-        """Encode the copies of ``n`` surfels' projections and colours into the textures and bind them in
-        ``resources`` in place of the buffers (whose bindings the texel variant does not declare)."""
+    def bind(self, encoder, resources: dict, projected: wgpu.GPUBuffer, colors4: wgpu.GPUBuffer, n: int,
+             lease: bool = False) -> TexelLease | None:
+        """Encode the copies of ``n`` surfels' projections and colours into textures and bind them in
+        ``resources`` in place of the buffers (whose bindings the texel variant does not declare). With
+        ``lease`` the textures are the caller's until it gives them back (returned; see bind_lease)."""
         del resources[1], resources[15]
-        resources[PROJECTED_BINDING] = self.copy(encoder, "projected", projected, PROJECTED_TEXELS * n)
-        resources[COLORS_BINDING] = self.copy(encoder, "colors", colors4, COLOR_TEXELS * n)
+        if not lease:
+            resources[PROJECTED_BINDING] = self.copy(encoder, "projected", projected, PROJECTED_TEXELS * n)
+            resources[COLORS_BINDING] = self.copy(encoder, "colors", colors4, COLOR_TEXELS * n)
+            return None
+        held = self._take_lease(n)
+        _copy_into(encoder, held.projected[0], projected, PROJECTED_TEXELS * n)
+        _copy_into(encoder, held.colors[0], colors4, COLOR_TEXELS * n)
+        resources[PROJECTED_BINDING], resources[COLORS_BINDING] = held.projected[1], held.colors[1]
+        return held
+
+    @staticmethod
+    def bind_lease(resources: dict, held: TexelLease) -> None:
+        """Bind a lease's textures as they are, in place of the buffers."""
+        del resources[1], resources[15]
+        resources[PROJECTED_BINDING], resources[COLORS_BINDING] = held.projected[1], held.colors[1]
+
+    def give_back(self, held: TexelLease) -> None:
+        """Return a lease for later renders (nothing may bind it any more)."""
+        self._free_leases.append(held)   # list.append: atomic, takes no lock
+
+    def _take_lease(self, n: int) -> TexelLease:
+        with self._lock:
+            while len(self._free_leases) > KEEP_LEASES:
+                self._free_leases.pop(0)
+            for i, held in enumerate(self._free_leases):
+                if held.surfels >= n:
+                    return self._free_leases.pop(i)
+        per_row = TEXEL_ROW // PROJECTED_TEXELS
+        rows = min(self.max_rows, -(-n * 5 // 4 // per_row) or 1)   # 25 % to grow into
+        surfels = rows * per_row
+        return TexelLease(self._new_texture("lease.projected", rows),
+                          self._new_texture("lease.colors", -(-surfels // TEXEL_ROW)), surfels)
 
     def view(self, name: str, texels: int) -> wgpu.GPUTextureView:
         """Texture ``name`` holding at least ``texels`` (at most ``max_texels``), for a pass to write."""
@@ -60,22 +112,31 @@ class SurfelTexels:
         """Encode a copy of the first ``texels`` vec4s of ``buf`` into texture ``name`` (at most
         ``max_texels``), and return its view."""
         tex, view = self._texture(name, -(-texels // TEXEL_ROW))
-        full, rest = divmod(texels, TEXEL_ROW)
-        row_bytes = 16 * TEXEL_ROW
-        if full:
-            encoder.copy_buffer_to_texture({"buffer": buf, "offset": 0, "bytes_per_row": row_bytes,
-                                            "rows_per_image": full}, {"texture": tex}, (TEXEL_ROW, full, 1))
-        if rest:   # the last, partial row
-            encoder.copy_buffer_to_texture({"buffer": buf, "offset": full * row_bytes, "bytes_per_row": row_bytes},
-                                           {"texture": tex, "origin": (0, full, 0)}, (rest, 1, 1))
+        _copy_into(encoder, tex, buf, texels)
         return view
 
     def _texture(self, name: str, rows: int) -> tuple[wgpu.GPUTexture, wgpu.GPUTextureView]:
         held = self._textures.get(name)
         if held is None or held[0].size[1] < rows:
             grown = rows if held is None else min(self.max_rows, max(rows, held[0].size[1] * 5 // 4))
-            tex = self.ctx.device.create_texture(
-                label=f"texels.{name}", size=(TEXEL_ROW, grown, 1), format=wgpu.TextureFormat.rgba32float,
-                usage=wgpu.TextureUsage.COPY_DST | wgpu.TextureUsage.STORAGE_BINDING)
-            held = self._textures[name] = (tex, tex.create_view())
+            held = self._textures[name] = self._new_texture(name, grown)
         return held
+
+    def _new_texture(self, name: str, rows: int) -> tuple[wgpu.GPUTexture, wgpu.GPUTextureView]:
+        tex = self.ctx.device.create_texture(
+            label=f"texels.{name}", size=(TEXEL_ROW, rows, 1), format=wgpu.TextureFormat.rgba32float,
+            usage=wgpu.TextureUsage.COPY_DST | wgpu.TextureUsage.STORAGE_BINDING)
+        return tex, tex.create_view()
+
+
+def _copy_into(encoder, tex: wgpu.GPUTexture, buf: wgpu.GPUBuffer, texels: int) -> None:
+    """Encode a copy of the first ``texels`` vec4s of ``buf`` into ``tex`` (texel t at (t % TEXEL_ROW,
+    t // TEXEL_ROW))."""
+    full, rest = divmod(texels, TEXEL_ROW)
+    row_bytes = 16 * TEXEL_ROW
+    if full:
+        encoder.copy_buffer_to_texture({"buffer": buf, "offset": 0, "bytes_per_row": row_bytes,
+                                        "rows_per_image": full}, {"texture": tex}, (TEXEL_ROW, full, 1))
+    if rest:   # the last, partial row
+        encoder.copy_buffer_to_texture({"buffer": buf, "offset": full * row_bytes, "bytes_per_row": row_bytes},
+                                       {"texture": tex, "origin": (0, full, 0)}, (rest, 1, 1))
