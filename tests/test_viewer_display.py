@@ -18,10 +18,10 @@ pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb
 def test_displays_started_together_are_distinct():
     # Six processes start a display at the same moment (each waits for "go" after its imports), as the
     # benchmark smoke runs can; each prints its DISPLAY, then keeps its Xvfb until stdin closes.
-    code = ("import os, sys; sys.path.insert(0, %r); os.environ.pop('DISPLAY', None); "
+    code = (f"import os, sys; sys.path.insert(0, {os.getcwd()!r}); os.environ.pop('DISPLAY', None); "
             "from viewer.display import ensure_display; print('ready', flush=True); sys.stdin.readline(); "
             "p = ensure_display('64x64x24'); print(os.environ['DISPLAY'], flush=True); sys.stdin.read(); "
-            "p.terminate()") % os.getcwd()
+            "p.terminate()")
     procs = [subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                               text=True) for _ in range(6)]
     for p in procs:
