@@ -7,18 +7,20 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from viewer.display import ensure_display
 
 pytestmark = pytest.mark.skipif(shutil.which("Xvfb") is None, reason="needs Xvfb")
+REPO = Path(__file__).resolve().parents[1]
 
 
 def test_displays_started_together_are_distinct():
     # Six processes start a display at the same moment (each waits for "go" after its imports), as the
     # benchmark smoke runs can; each prints its DISPLAY, then keeps its Xvfb until stdin closes.
-    code = (f"import os, sys; sys.path.insert(0, {os.getcwd()!r}); os.environ.pop('DISPLAY', None); "
+    code = (f"import os, sys; sys.path.insert(0, {str(REPO)!r}); os.environ.pop('DISPLAY', None); "
             "from viewer.display import ensure_display; print('ready', flush=True); sys.stdin.readline(); "
             "p = ensure_display('64x64x24'); print(os.environ['DISPLAY'], flush=True); sys.stdin.read(); "
             "p.terminate()")
