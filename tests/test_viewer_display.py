@@ -1,5 +1,6 @@
 """The virtual display the window benchmarks start (viewer/display.py): scripts started together get
-displays of their own (Xvfb picks a free number itself), so one ending never takes another's display."""
+displays of their own (a server that did not win a number's lock file moves on), so one ending never takes
+another's display."""
 
 from __future__ import annotations
 
