@@ -483,9 +483,9 @@ class SurfelRasterizer:
         texels = self._texels_for(defines, n) if records is not None else None
         defines["SURFEL_TEXELS"] = texels is not None
         # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
-        record_texels = _record_bytes(state.num_isects, normal_depth) // 16
+        record_bytes = _record_bytes(state.num_isects, normal_depth)
         defines["RECORD_TEXELS"] = use_record_texels = (records is not None and self.use_surfel_texels
-                                                        and record_texels <= self.texels.max_texels)
+                                                        and record_bytes // 16 <= self.texels.max_texels)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
@@ -506,13 +506,12 @@ class SurfelRasterizer:
             # Scratch (the gradients are read back before this returns). Only records that the slots
             # point to are read, all written by this pass: no clearing; the slots are cleared.
             if use_record_texels:
-                grads = self.texels.view("records", record_texels)
-                resources[23] = grads
+                resources[23] = grads = self.texels.view("records", record_bytes // 16)
             else:
-                resources[12] = grads = self.workspace.get("grad_records", _record_bytes(state.num_isects,
-                                                                                          normal_depth))
-            slots = self.workspace.get("record_slots", 4 * max(state.num_isects, 1))
-            enc.clear_buffer(slots, 0, 4 * max(state.num_isects, 1))
+                resources[12] = grads = self.workspace.get("grad_records", record_bytes)
+            slot_bytes = 4 * max(state.num_isects, 1)
+            slots = self.workspace.get("record_slots", slot_bytes)
+            enc.clear_buffer(slots, 0, slot_bytes)
             resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks, 22: slots})
         else:
             grads = ctx.buffer(4 * 16 * n, "v_proj")

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import wgpu
 
-# Texels per row: 1024 surfels of 4 texels (t0, t1, t2, normal_depth), or 4096 colours. The tile walks
-# address them with the same constants (surfel_texels.wgsl).
+# Texels per row: 1024 surfels of 4 texels (t0, t1, t2, normal_depth), or 4096 colours. The shaders
+# address them with the same constant (texel_at in common/render_types.wgsl).
 TEXEL_ROW = 4096
 PROJECTED_TEXELS = 4
 COLOR_TEXELS = 1
@@ -70,15 +70,15 @@ class SurfelTexels:
         """Encode the copies of ``n`` surfels' projections and colours into textures and bind them in
         ``resources`` in place of the buffers (whose bindings the texel variant does not declare). With
         ``lease`` the textures are the caller's until it gives them back (returned; see bind_lease)."""
-        del resources[1], resources[15]
         if not lease:
+            del resources[1], resources[15]
             resources[PROJECTED_BINDING] = self.copy(encoder, "projected", projected, PROJECTED_TEXELS * n)
             resources[COLORS_BINDING] = self.copy(encoder, "colors", colors4, COLOR_TEXELS * n)
             return None
         held = self._take_lease(n)
         _copy_into(encoder, held.projected[0], projected, PROJECTED_TEXELS * n)
         _copy_into(encoder, held.colors[0], colors4, COLOR_TEXELS * n)
-        resources[PROJECTED_BINDING], resources[COLORS_BINDING] = held.projected[1], held.colors[1]
+        self.bind_lease(resources, held)
         return held
 
     @staticmethod
@@ -98,20 +98,19 @@ class SurfelTexels:
             for i, held in enumerate(self._free_leases):
                 if held.surfels >= n:
                     return self._free_leases.pop(i)
-        per_row = TEXEL_ROW // PROJECTED_TEXELS
-        rows = min(self.max_rows, -(-n * 5 // 4 // per_row) or 1)   # 25 % to grow into
-        surfels = rows * per_row
+        rows = min(self.max_rows, max(1, _rows_for(PROJECTED_TEXELS * -(-5 * n // 4))))   # 25 % to grow into
+        surfels = rows * (TEXEL_ROW // PROJECTED_TEXELS)
         return TexelLease(self._new_texture("lease.projected", rows),
-                          self._new_texture("lease.colors", -(-surfels // TEXEL_ROW)), surfels)
+                          self._new_texture("lease.colors", _rows_for(COLOR_TEXELS * surfels)), surfels)
 
     def view(self, name: str, texels: int) -> wgpu.GPUTextureView:
         """Texture ``name`` holding at least ``texels`` (at most ``max_texels``), for a pass to write."""
-        return self._texture(name, -(-texels // TEXEL_ROW))[1]
+        return self._texture(name, _rows_for(texels))[1]
 
     def copy(self, encoder, name: str, buf: wgpu.GPUBuffer, texels: int) -> wgpu.GPUTextureView:
         """Encode a copy of the first ``texels`` vec4s of ``buf`` into texture ``name`` (at most
         ``max_texels``), and return its view."""
-        tex, view = self._texture(name, -(-texels // TEXEL_ROW))
+        tex, view = self._texture(name, _rows_for(texels))
         _copy_into(encoder, tex, buf, texels)
         return view
 
@@ -127,6 +126,11 @@ class SurfelTexels:
             label=f"texels.{name}", size=(TEXEL_ROW, rows, 1), format=wgpu.TextureFormat.rgba32float,
             usage=wgpu.TextureUsage.COPY_DST | wgpu.TextureUsage.STORAGE_BINDING)
         return tex, tex.create_view()
+
+
+def _rows_for(texels: int) -> int:
+    """Texture rows that hold ``texels`` vec4s."""
+    return -(-texels // TEXEL_ROW)
 
 
 def _copy_into(encoder, tex: wgpu.GPUTexture, buf: wgpu.GPUBuffer, texels: int) -> None:

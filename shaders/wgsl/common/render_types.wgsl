@@ -18,6 +18,12 @@ const TILE_KEY_MASK: u32 = 0xffffu;
 const SURFEL_ID_BITS: u32 = 24u;
 const SURFEL_ID_MASK: u32 = (1u << SURFEL_ID_BITS) - 1u;
 
+// Vec4 t of a buffer copied into (or written as) an rgba32float texture lies at texel (t % 4096, t / 4096)
+// (TEXEL_ROW in gma/render/surfel_texels.py): the lavapipe tile walks' surfel and record textures.
+fn texel_at(t: u32) -> vec2<u32> {
+    return vec2<u32>(t & 4095u, t >> 12u);
+}
+
 // Per-frame parameters (uniform, 128 bytes).
 struct RenderParams {
     w2c_r0: vec4<f32>,          // rows of the world->camera [R | t]

@@ -19,11 +19,11 @@
 @group(0) @binding(4) var<storage, read> tile_counts: array<u32>;  // [N], 0 when culled
 #if GRAD_RECORDS
 #if RECORD_TEXELS
-// The records copied into a texture (texel t at (t % 4096, t / 4096); gma/render/surfel_texels.py):
-// on lavapipe a texel fetch gathers for all lanes at once.
+// The records as the backward's tile walk wrote them into a texture (texel_at; see
+// gma/render/surfel_texels.py): on lavapipe a texel fetch gathers for all lanes at once.
 @group(0) @binding(13) var record_texels: texture_storage_2d<rgba32float, read>;
 fn load_record(t: u32) -> vec4<f32> {
-    return textureLoad(record_texels, vec2<u32>(t & 4095u, t >> 12u));
+    return textureLoad(record_texels, texel_at(t));
 }
 #else
 @group(0) @binding(5) var<storage, read> records: array<vec4<f32>>;  // [isects, RECORD_VEC4S]

@@ -216,8 +216,7 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 // (tile_walk_bwd.wgsl). The sums run in a fixed order, so the gradients are the same on every run, also
 // under load.
 #if RECORD_TEXELS
-// The records as rgba32float texels, RECORD_VEC2S / 2 per record, texel t at (t % 4096, t / 4096)
-// (gma/render/surfel_texels.py): project_bwd's scattered reads gather for all lanes at once.
+// The records as rgba32float texels, RECORD_VEC2S / 2 per record (texel_at; gma/render/surfel_texels.py): project_bwd's scattered reads gather for all lanes at once.
 @group(0) @binding(23) var record_texels: texture_storage_2d<rgba32float, write>;
 #else
 @group(0) @binding(12) var<storage, read_write> records: array<vec2<f32>>;   // [isects, RECORD_VEC2S]

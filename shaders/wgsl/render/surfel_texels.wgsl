@@ -1,9 +1,8 @@
 // The tile walks' reads of a surfel's projection and colour (included by rasterize_core.wgsl with
 // TILE_WALK). With SURFEL_TEXELS they come from storage textures that the rasterizer filled from the
-// buffers right before the pass (gma/render/surfel_texels.py, which explains why: on lavapipe a texel
-// fetch serves all lanes at once, a buffer read at a lane-varying index loops over the lanes); without,
-// from the buffers. Layout: surfel i's t0, t1, t2, normal_depth at texels 4 (i % 1024) + 0..3 of row
-// i / 1024, its colour at texel i % 4096 of row i / 4096 (TEXEL_ROW = 4096 there).
+// buffers (gma/render/surfel_texels.py, which explains why: on lavapipe a texel fetch serves all lanes at
+// once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers. Layout
+// (texel_at): surfel i's t0, t1, t2, normal_depth are vec4s 4 i + 0..3, its colour vec4 i.
 
 #if SURFEL_TEXELS
 @group(0) @binding(20) var projected_texels: texture_storage_2d<rgba32float, read>;
@@ -11,11 +10,11 @@
 
 // Row k of surfel sid's projection (0: t0, 1: t1, 2: t2, 3: normal_depth).
 fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {
-    return textureLoad(projected_texels, vec2<u32>(((sid & 1023u) << 2u) | k, sid >> 10u));
+    return textureLoad(projected_texels, texel_at(4u * sid + k));
 }
 
 fn load_color4(sid: u32) -> vec4<f32> {
-    return textureLoad(color_texels, vec2<u32>(sid & 4095u, sid >> 12u));
+    return textureLoad(color_texels, texel_at(sid));
 }
 #else
 fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {

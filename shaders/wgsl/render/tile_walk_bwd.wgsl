@@ -143,8 +143,7 @@ fn store_record(rec: u32, s: ProjectedSurfel, t: HitTotals, sg_lane: u32) {
     count = 5u;
 #endif
     if sg_lane < count {
-        let at = rec * (RECORD_VEC2S / 2u) + sg_lane;
-        textureStore(record_texels, vec2<u32>(at & 4095u, at >> 12u), texel);
+        textureStore(record_texels, texel_at(rec * (RECORD_VEC2S / 2u) + sg_lane), texel);
     }
 #else
     records[rec * RECORD_VEC2S + sg_lane] = pair;
