@@ -29,6 +29,7 @@ SMOKE: dict[str, list[str] | str] = {
                            "--reference-count", "300", "--reference-size", "32"],
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
     "shader_ab.py": ["{repo}/shaders/wgsl", "{repo}/shaders/wgsl", "--rounds", "2", "--count", "500"],
+    "lavapipe_profile.py": ["--seconds", "2", "--count", "500", "--frequency", "499"],
     "sort.py": ["--depth-keys", "3000", "--tile-keys", "5000", "--rounds", "2", "--repeat", "1"],
     "body_posing.py": ["--per-face", "1", "--frames", "2"],
     "synth.py": ["--size", "48", "--train-frames", "4", "--texture-size", "256"],

@@ -41,12 +41,19 @@ class PassTimer:
 
     def results(self) -> dict[str, float]:
         """Milliseconds per pass name (summed over passes sharing a name)."""
-        if not self.enabled or not self.names:
-            return {}
-        raw = self.ctx.read(self.resolve_buf, np.uint64, 2 * len(self.names)).reshape(-1, 2)
         out: dict[str, float] = {}
-        for name, (t0, t1) in zip(self.names, raw):
-            out[name] = out.get(name, 0.0) + max(0, int(t1) - int(t0)) * 1e-6
+        for name, t0, t1 in self.intervals():
+            out[name] = out.get(name, 0.0) + max(0, t1 - t0) * 1e-6
+        return out
+
+    def intervals(self) -> list[tuple[str, int, int]]:
+        """(name, begin, end) of every pass in submission order, as raw timestamps (nanoseconds of the
+        device's clock; on lavapipe the CPU's monotonic clock, so they line up with a profiler's samples:
+        benchmarks/lavapipe_profile.py). Like :meth:`results`, starts a new collection."""
+        if not self.enabled or not self.names:
+            return []
+        raw = self.ctx.read(self.resolve_buf, np.uint64, 2 * len(self.names)).reshape(-1, 2)
+        out = [(name, int(t0), int(t1)) for name, (t0, t1) in zip(self.names, raw)]
         self.names = []
         return out
 
