@@ -73,6 +73,29 @@ def workload_surfels(module, n: int) -> tuple[dict, object]:
     return scene, cam
 
 
+# The render passes that PassTimer names, in order (shader_ab.py, lavapipe_profile.py).
+PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "project_bwd")
+
+
+def scene_and_camera(count: int, kind: str = "standard", size: int = 512):
+    """``count`` surfels and a camera: the standard scene (a random scene without ../shared), or with
+    ``kind="avatar"`` avatar-like surfels (small, tangent to a body-shaped surface) at ``size`` pixels."""
+    import numpy as np
+
+    if kind == "avatar":
+        from gma.render.scenes import avatar_camera, avatar_like_scene
+
+        return avatar_like_scene(count), avatar_camera(size, size)
+    module = load_standard_workload()
+    if module is not None:
+        return workload_surfels(module, count)
+    from gma.core.camera import Camera
+    from gma.render.scenes import random_scene
+
+    K = np.array([[400.0, 0, 128], [0, 400.0, 128], [0, 0, 1]], np.float32)
+    return random_scene(count, 0), Camera(np.eye(4, dtype=np.float32), K, 256, 256)
+
+
 class CheckoutWorker:
     """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
     checkout, which prints "ready" once set up and then answers each request line with one line. Lets a

@@ -31,11 +31,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import machine  # noqa: E402
-from shader_ab import MAX_SURFELS, PASSES, scene_and_camera  # noqa: E402
+from common import PASSES, machine, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
+from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 KINDS = ("shader", "shared JIT", "libc", "driver", "kernel", "other")
 OUTSIDE = "(outside passes)"

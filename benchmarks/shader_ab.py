@@ -23,30 +23,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import load_standard_workload, machine, workload_surfels  # noqa: E402
+from common import PASSES, machine, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.gpu.shaders import ShaderLibrary  # noqa: E402
 from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
-from gma.render.rasterizer import MAX_WORKGROUPS  # noqa: E402
-
-MAX_SURFELS = MAX_WORKGROUPS * 256
-PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "project_bwd")
-
-
-def scene_and_camera(count: int, kind: str = "standard", size: int = 512):
-    if kind == "avatar":
-        from gma.render.scenes import avatar_camera, avatar_like_scene
-
-        return avatar_like_scene(count), avatar_camera(size, size)
-    module = load_standard_workload()
-    if module is not None:
-        return workload_surfels(module, count)
-    from gma.core.camera import Camera
-    from gma.render.scenes import random_scene
-
-    K = np.array([[400.0, 0, 128], [0, 400.0, 128], [0, 0, 1]], np.float32)
-    return random_scene(count, 0), Camera(np.eye(4, dtype=np.float32), K, 256, 256)
+from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 
 def main() -> int:

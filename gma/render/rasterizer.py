@@ -30,6 +30,7 @@ from gma.render.surfels import SurfelBuffers
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
 INDIRECT = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.INDIRECT | wgpu.BufferUsage.COPY_DST
 MAX_WORKGROUPS = 65535
+MAX_SURFELS = MAX_WORKGROUPS * 256  # one projection thread per surfel; also keeps ids below 2^SURFEL_ID_BITS
 MAX_IMAGE_SIDE = 65535  # project_fwd.wgsl packs 4x2-block coordinates in 16 bits (rasterize() already caps at 16384)
 DEPTH_KEY_BITS = 24  # depth_key() in project_fwd.wgsl
 RASTER_THREADS_SUBGROUPS = 64  # threads per tile of the subgroup rasterizers (RASTER_THREADS in rasterize_core.wgsl)
@@ -209,8 +210,8 @@ class SurfelRasterizer:
         """Encode projection (then :meth:`depth_order` sorts). With ``keep`` the buffers the backward pass
         reads are allocated for this call; the rest is workspace scratch."""
         ctx, n = self.ctx, surfels.count
-        if n > MAX_WORKGROUPS * 256:  # also keeps surfel ids below 2^SURFEL_ID_BITS (tested)
-            raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_WORKGROUPS * 256}")
+        if n > MAX_SURFELS:  # tested against SURFEL_ID_BITS in test_render_layouts.py
+            raise ValueError(f"{n} surfels exceed this renderer's limit of {MAX_SURFELS}")
         if max(camera.width, camera.height) > MAX_IMAGE_SIDE:
             raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "
                              f"{MAX_IMAGE_SIDE} pixels per side")
