@@ -16,7 +16,7 @@ var<workgroup> bins: array<u32, RADIX + 1u>;
 
 @compute @workgroup_size(LANES)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) lane: u32) {
-    let block = wg.x;
+    let block = lane_block(wg.x);
     let groups = lane_groups(info.groups_x);
     if block >= groups {
         return;

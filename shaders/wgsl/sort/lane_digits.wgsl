@@ -18,6 +18,13 @@ fn lane_groups(sort_blocks: u32) -> u32 {
     return (sort_blocks + GROUP_BLOCKS - 1u) / GROUP_BLOCKS;
 }
 
+// The block of workgroup `w` (of info.groups_x), or one past any block: every GROUP_BLOCKS-th workgroup
+// takes one. Lavapipe hands each of its threads a contiguous share of a dispatch's workgroups, so with the
+// first lane_groups() workgroups working one thread did the whole pass while the others returned.
+fn lane_block(w: u32) -> u32 {
+    return select(0xffffffffu, w / GROUP_BLOCKS, w % GROUP_BLOCKS == 0u);
+}
+
 #include "sort/key_digits.wgsl"
 
 // The keys [start, end) of workgroup `block` (LANE_BLOCK of them, fewer in the last) among `count` keys.
