@@ -96,6 +96,19 @@ def scene_and_camera(count: int, kind: str = "standard", size: int = 512):
     return random_scene(count, 0), Camera(np.eye(4, dtype=np.float32), K, 256, 256)
 
 
+def pass_inputs(ctx, scene: dict, cam):
+    """A scene's surfels uploaded to the GPU and a fixed random colour gradient of its image (scale 1e-3):
+    what the pass-by-pass scripts (shader_ab.py, lavapipe_profile.py) render and backpropagate."""
+    import numpy as np
+
+    from gma.render import SurfelBuffers
+
+    surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
+                                        scene["colors"])
+    upstream = np.random.default_rng(0).normal(size=(cam.height, cam.width, scene["colors"].shape[1]))
+    return surfels, (upstream * 1e-3).astype(np.float32)
+
+
 class CheckoutWorker:
     """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
     checkout, which prints "ready" once set up and then answers each request line with one line. Lets a

@@ -28,13 +28,11 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import PASSES, machine, scene_and_camera  # noqa: E402
+from common import PASSES, machine, pass_inputs, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
-from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
+from gma.render import SurfelRasterizer, read_outputs  # noqa: E402
 from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 KINDS = ("shader", "shared JIT", "libc", "driver", "kernel", "other")
@@ -138,10 +136,7 @@ def main() -> int:
         print(why)
         return 0
     scene, cam = scene_and_camera(args.count, args.scene, args.size)
-    surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
-                                        scene["colors"])
-    upstream = (np.random.default_rng(0).normal(size=(cam.height, cam.width, scene["colors"].shape[1])) * 1e-3)
-    upstream = upstream.astype(np.float32)
+    surfels, upstream = pass_inputs(ctx, scene, cam)
     rast, timer = SurfelRasterizer(ctx), PassTimer(ctx)
 
     def step() -> list[tuple[str, int, int]]:
@@ -167,7 +162,12 @@ def main() -> int:
             intervals += step()
             steps += 1
         rec.send_signal(signal.SIGINT)
-        rec.wait(timeout=60)
+        try:
+            rec.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            rec.kill()
+            print("perf record did not stop within 60 s after SIGINT: nothing to report")
+            return 0
         script = subprocess.run(["perf", "script", "-i", str(data), "-F", "time,ip,dso", "--ns"],
                                 capture_output=True, text=True, timeout=300)
     samples = parse_samples(script.stdout)

@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import PASSES, machine, scene_and_camera  # noqa: E402
+from common import PASSES, machine, pass_inputs, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.gpu.shaders import ShaderLibrary  # noqa: E402
-from gma.render import SurfelBuffers, SurfelRasterizer, read_outputs  # noqa: E402
+from gma.render import SurfelRasterizer, read_outputs  # noqa: E402
 from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 
@@ -57,10 +57,7 @@ def main() -> int:
     ctx = get_context()
     print(f"adapter: {ctx.name}; {machine()}")
     scene, cam = scene_and_camera(args.count, args.scene, args.size)
-    surfels = SurfelBuffers.from_arrays(ctx, scene["means"], scene["quats"], scene["scales"], scene["opacities"],
-                                        scene["colors"])
-    upstream = np.random.default_rng(0).normal(size=(cam.height, cam.width, scene["colors"].shape[1]))
-    upstream = (upstream * 1e-3).astype(np.float32)
+    surfels, upstream = pass_inputs(ctx, scene, cam)
     # Each directory gets its own shader library and pipeline cache; the context switches between them.
     setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx)) for d in dirs]
     timer = PassTimer(ctx)

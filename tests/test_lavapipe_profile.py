@@ -5,6 +5,7 @@ test_benchmarks.py runs the whole script, with perf where the machine has it.)""
 from __future__ import annotations
 
 import importlib.util
+import subprocess
 import sys
 from pathlib import Path
 
@@ -61,3 +62,15 @@ def test_samples_land_in_their_pass_and_shared_code_is_told_apart(profile):
                                        ("[kernel.kallsyms]", "kernel"), ("/usr/lib/libpython3.11.so", "other")])
 def test_objects_are_classified(profile, dso, kind):
     assert profile.kind_of(dso) == kind
+
+
+@pytest.mark.parametrize("args, says", [(["--seconds", "0"], "--seconds"), (["--seconds", "nan"], "--seconds"),
+                                        (["--count", "0"], "--count"), (["--size", "8"], "--size"),
+                                        (["--frequency", "100000"], "--frequency")])
+def test_bad_arguments_get_one_line_and_exit_2(args, says):
+    done = subprocess.run([sys.executable, str(BENCH / "lavapipe_profile.py"), *args], capture_output=True,
+                          text=True, timeout=120, cwd=BENCH.parent)
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and says in lines[0], done.stderr
+    assert "adapter:" not in done.stdout   # refused before any GPU work
