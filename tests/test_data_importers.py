@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+from pathlib import Path
 
 import imageio.v3 as iio
 import imageio_ffmpeg
@@ -335,11 +336,51 @@ def test_video_errors(tmp_path):
             tmp_path / "clip.mp4", tmp_path / "out", body=body, camera=cam, mask_video=tmp_path / "clip.mp4"
         )
     body, cam = video_inputs(tmp_path)
-    with pytest.raises(ValueError, match="fully opaque"):
+    earlier = set(ffmpeg_children())   # any left by other tests' code
+    with pytest.raises(ValueError, match="fully opaque") as error:
         import_video(tmp_path / "clip.mp4", tmp_path / "out", body=body, camera=cam, alpha=True)
+    # The decoder stopped with the error, though its traceback (which holds the reading frames) is kept.
+    assert error.traceback and set(ffmpeg_children()) <= earlier
+    # Also where the error comes from the writer while the video and the mask video are being read.
+    other = tmp_path / "other.json"   # cameras of another size than the video's frames
+    other.write_text(json.dumps({"width": 2 * VW, "height": 2 * VH, "K": [[60, 0, 32], [0, 60, 24], [0, 0, 1]],
+                                 "w2c": np.eye(4).tolist()}))
+    with pytest.raises(ValueError, match="frame 0: image is 32x24, cameras say 64x48") as error:
+        import_video(tmp_path / "clip.mp4", tmp_path / "out", body=body, camera=other, mask_video=tmp_path / "clip.mp4")
+    assert error.traceback and set(ffmpeg_children()) <= earlier
     with pytest.raises(FileNotFoundError, match="nope.mp4: video not found"):
         import_video(tmp_path / "nope.mp4", tmp_path / "out", body=body, camera=cam, alpha=True)
     assert not (tmp_path / "out").exists()
+
+
+def ffmpeg_children() -> list[int]:
+    """Process ids of this process's ffmpeg children, running or ended but not yet reaped (an ffmpeg that
+    wrote a small clip into its pipe and ended; its pipes stay open until it is). Linux; [] elsewhere."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            pid, rest = stat.read_text().split(" (", 1)
+        except OSError:
+            continue  # ended while listed
+        comm, fields = rest.rsplit(") ", 1)
+        ppid = fields.split()[1]
+        if int(ppid) == os.getpid() and "ffmpeg" in comm:
+            found.append(int(pid))
+    return found
+
+
+def test_reading_stops_ffmpeg_on_errors(tmp_path):
+    """A read that stops on an error (here the memory budget, after the first frame) ends its ffmpeg
+    process at once, not when the error's traceback is dropped."""
+    from gma.video import VideoError, read_video
+
+    write_video(tmp_path / "clip.mp4", [np.zeros((VH, VW, 3), np.uint8)] * VT)
+    earlier = set(ffmpeg_children())   # any left by other tests' code
+    with pytest.raises(VideoError, match="more than this machine's memory allows") as error:
+        read_video(tmp_path / "clip.mp4", max_bytes=VW * VH * 3 + 1)
+    assert error.traceback and set(ffmpeg_children()) <= earlier
+    frames, idx = read_video(tmp_path / "clip.mp4", end=2)  # stopped early by the selection: ended too
+    assert idx == [0, 1] and set(ffmpeg_children()) <= earlier
 
 
 def test_cli_import(tmp_path, capsys):

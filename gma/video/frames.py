@@ -4,6 +4,7 @@ name the file and say what is wrong (not a video, no frames, a truncated file)."
 from __future__ import annotations
 
 import os
+from contextlib import closing
 from pathlib import Path
 
 import numpy as np
@@ -61,19 +62,21 @@ def read_video(path: str | os.PathLike, start: int = 0, end: int | None = None, 
     frames, idx, selected, decoded = [], [], 0, 0  # decoded: frames known decoded, up to the last one received
     info = {} if info is None else info
     try:
-        for k, img in enumerate(read_frames(path, False, info, None if whole else (start, end, skip))):
-            i = start + k * skip  # the source frame: ffmpeg's select keeps exactly these
-            selected, decoded = k + 1, i + 1
-            if max_bytes is not None and selected * img.nbytes > max_bytes:
-                raise _too_big(path, img, max_bytes, info.get("frames_estimate"), start, end, skip)
-            if max_frames is None or selected <= max_frames:
-                frames.append(img.copy())
-                idx.append(i)
-            if end is not None and i + skip >= end:
-                break  # the selection's last frame: the rest of the clip need not be decoded
-        else:
-            if whole:
-                info["frames_total"] = decoded  # decoded to the end of the stream: the clip's frame count
+        # Closed when reading stops, also on an error: ffmpeg ends then, not when the traceback goes.
+        with closing(read_frames(path, False, info, None if whole else (start, end, skip))) as stream:
+            for k, img in enumerate(stream):
+                i = start + k * skip  # the source frame: ffmpeg's select keeps exactly these
+                selected, decoded = k + 1, i + 1
+                if max_bytes is not None and selected * img.nbytes > max_bytes:
+                    raise _too_big(path, img, max_bytes, info.get("frames_estimate"), start, end, skip)
+                if max_frames is None or selected <= max_frames:
+                    frames.append(img.copy())
+                    idx.append(i)
+                if end is not None and i + skip >= end:
+                    break  # the selection's last frame: the rest of the clip need not be decoded
+            else:
+                if whole:
+                    info["frames_total"] = decoded  # decoded to the end of the stream: the clip's frame count
     except InputError:
         raise
     except ValueError as exc:  # raised by read_frames when ffmpeg cannot open the file

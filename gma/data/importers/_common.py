@@ -114,6 +114,8 @@ def write_imported(
             extra(writer)
     except BaseException:
         writer.abort()
+        if hasattr(frames, "close"):  # a generator: its readers (a video's ffmpeg) end now, not with the traceback
+            frames.close()
         raise
     return writer.close()
 

@@ -16,6 +16,7 @@ import os
 import re
 import subprocess
 from collections.abc import Iterator
+from contextlib import ExitStack, closing
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -228,8 +229,15 @@ def import_video(
     wanted = set(idx)
 
     def frames():
-        masks = read_frames(mask_video, False) if mask_video is not None else None
-        for i, img in enumerate(read_frames(src, alpha)):
+        # Both decoders close (ending their ffmpeg processes) when this generator stops, also on an error:
+        # an exception's traceback would otherwise keep them running as long as it is kept.
+        with ExitStack() as stack:
+            masks = stack.enter_context(closing(read_frames(mask_video, False))) if mask_video is not None else None
+            video = stack.enter_context(closing(read_frames(src, alpha)))
+            yield from selected(video, masks)
+
+    def selected(video, masks):
+        for i, img in enumerate(video):
             m = next(masks) if masks is not None else None
             if i not in wanted:
                 continue
