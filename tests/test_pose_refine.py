@@ -342,14 +342,17 @@ def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu
     assert after[0] < 0.7 * before[0], (before, after)
     # the squared colour error (TEST_TIME_MSE) is part of the loss: without it the same steps end elsewhere,
     # with a worse picture and farther from the true root position, while the root's rotation ends about
-    # as far either way. Measured on five perturbations of this frame (2026-12-01): PSNR +0.10 to +0.73 dB
-    # and root position 0.02-0.10 cm closer with the term, root rotation -0.27 to +0.10 deg; here 28.27
-    # against 27.59 dB, 0.46 against 0.51 cm, 3.27 against 3.17 deg. (Which way the rotation goes flips with
-    # the renderer's float summation order, through the fitted avatar: 2.90 against 3.36 deg before.)
+    # as far either way. Measured on five perturbations of this frame (2026-12-01, an AVX2 AMD VM): PSNR
+    # +0.10 to +0.73 dB and root position 0.02-0.10 cm closer with the term, root rotation -0.27 to +0.10
+    # deg; here 28.27 against 27.59 dB, 0.46 against 0.51 cm, 3.27 against 3.17 deg. On an AVX-512 AMD VM
+    # (2026-12-02, whose float rounding fits another avatar) the same five: PSNR +0.055 to +0.152 dB, root
+    # position 0.06-0.42 cm and rotation 0.01-0.38 deg closer; here 27.71 against 27.59 dB. So the test
+    # asserts a better picture, not by how much. (Which way the rotation goes flips with the renderer's float
+    # summation order, through the fitted avatar: 2.90 against 3.36 deg before.)
     plain = PoseCorrections(anny_body, frames.poses, frames.indices, BONE_SETS["video"])
     fit_corrections(plain, decoded, anny_body, frames, 25, cfg, 0.5, gpu, mse=0.0)
     without = _root_error(plain.all_poses(), truth)
-    assert score(refined)["psnr"] > score(plain.all_poses())["psnr"] + 0.3
+    assert score(refined)["psnr"] > score(plain.all_poses())["psnr"]
     assert after[1] < without[1] and after[0] < without[0] + 0.3, (after, without)
 
 
