@@ -160,6 +160,41 @@ def test_surfel_texels_change_nothing(gpu):
         assert np.abs(grads_a.means).sum() > 0
 
 
+def test_walk_layout_changes_nothing_and_the_backward_reads_its_forwards(gpu):
+    """With the tile walk, projection writes the walks' layout (each surfel's colour beside its T rows, the
+    normal and depth apart: surfel_texels.wgsl): images and gradients bit for bit those of the standard
+    layout. The backward reads the layout its forward wrote: the same gradients when the tile walk and
+    the layout are switched off between the two, and, to float rounding (atomics instead of records),
+    from the per-subgroup backward that a render without gradient records takes."""
+    if not SurfelRasterizer(gpu).use_grad_records:
+        pytest.skip("the walks' layout serves lavapipe's tile walks")
+    cam = default_camera(72, 56)
+    scene = torch_scene(1800, seed=21, spread=0.8, scale_range=(0.02, 0.15))
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+    for which in (("color",), ("color", "normal", "depth")):   # without and with normal/depth gradients
+        up = random_upstream(cam, seed=8, which=which)
+        grads, images = [], []
+        for layout, switch_off, records in ((True, False, True), (False, False, True), (True, True, True),
+                                            (True, False, False)):
+            rast = SurfelRasterizer(gpu)
+            rast.use_grad_records, rast.use_walk_layout = records, layout
+            state = rast.forward(buffers, cam)
+            assert state.proj.walk_layout == layout and (state.records is not None) == records
+            images.append(read_outputs(gpu, state))
+            rast.use_tile_walk = rast.use_walk_layout = not switch_off
+            grads.append(rast.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"]))
+        walked, standard, switched, per_subgroup = grads
+        for k in ("color", "alpha", "normal", "depth"):
+            assert np.array_equal(getattr(images[0], k), getattr(images[1], k)), (which, k)
+        for k in NAMES:
+            assert np.array_equal(getattr(walked, k), getattr(standard, k)), (which, k)
+            assert np.array_equal(getattr(walked, k), getattr(switched, k)), (which, k)
+            # As records against atomics in test_gradient_records_reproducible_and_equal_to_atomics.
+            scale = float(np.abs(getattr(walked, k)).max())
+            assert np.abs(getattr(per_subgroup, k) - getattr(walked, k)).max() <= 1e-5 * scale, (which, k)
+        assert np.abs(walked.colors).sum() > 0 and np.abs(walked.means).sum() > 0
+
+
 def test_interleaved_renders_keep_their_own_texels(gpu):
     """A replayed render's surfel textures are its state's (TexelLease) until the state is gone: renders
     of other scenes between a forward and its backward change nothing, and given-back textures serve

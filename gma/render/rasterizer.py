@@ -24,7 +24,7 @@ from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
 from gma.render.layouts import render_params, tile_grid
-from gma.render.surfel_texels import SurfelTexels, TexelLease
+from gma.render.surfel_texels import COLORS_BINDING, SurfelTexels, TexelLease
 from gma.render.surfels import SurfelBuffers
 
 UNIFORM = wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST
@@ -43,10 +43,11 @@ class ProjectionState:
     """GPU buffers written by projection, depth sort and the tile-count scan (by surfel, or depth order)."""
 
     params: wgpu.GPUBuffer        # RenderParams uniform
-    projected: wgpu.GPUBuffer     # [N] ProjectedSurfel
+    projected: wgpu.GPUBuffer     # [N] ProjectedSurfel (with walk_layout the colour in place of normal, depth)
     tile_rects: wgpu.GPUBuffer    # [N] vec4<u32>
     block_bands: wgpu.GPUBuffer   # [N] vec2<u32>: per 8-row band the 4-pixel columns where alpha >= 1/255 can be
-    colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded (depth in w below 4 channels)
+    colors4: wgpu.GPUBuffer       # [N] vec4<f32> colour channels 0-3, zero-padded (depth in w below 4
+                                  # channels); with walk_layout the normal and depth
     pixel_rows: wgpu.GPUBuffer | None  # [N] u32: the box's first | last pixel row << 16 (the forward's tile walk)
     tile_counts: wgpu.GPUBuffer   # [N]
     depth_keys: wgpu.GPUBuffer    # [N] sorted
@@ -58,6 +59,11 @@ class ProjectionState:
     # Those of the above taken from the recycler for the caller to keep (project(keep=True)); forward()
     # gives them back with its state.
     kept: list[wgpu.GPUBuffer] = field(default_factory=list)
+    # Whether the tile walks render these (TILE_WALK) and projection wrote their layout of projected and
+    # colors4 (WALK_LAYOUT in project_fwd.wgsl): the passes that read them are compiled to match, whatever
+    # use_tile_walk and use_walk_layout say by then.
+    tile_walk: bool = False
+    walk_layout: bool = False
 
 
 @dataclass
@@ -151,6 +157,10 @@ class SurfelRasterizer:
         # gradient records, from textures (surfel_texels.py), where they fit; tests switch it off to check
         # that the buffer reads give the same images and gradients.
         self.use_surfel_texels = True
+        # With the tile walks projection puts each surfel's colour beside its T rows and its normal and
+        # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
+        # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
+        self.use_walk_layout = True
         self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
 
@@ -169,10 +179,13 @@ class SurfelRasterizer:
         fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
         while batch > 32 and batch * per_surfel + fixed > limit:
             batch //= 2
-        defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1, "TILE_WALK": False}
+        defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1, "TILE_WALK": False,
+                   "WALK_LAYOUT": False}
         if sg:
             # 8 lanes (lavapipe): one subgroup composites a whole tile (tile_walk_fwd.wgsl).
-            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=sg == 8 and self.use_tile_walk)
+            tile_walk = sg == 8 and self.use_tile_walk
+            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=tile_walk,
+                           WALK_LAYOUT=tile_walk and self.use_walk_layout)
         return defines
 
     def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
@@ -219,7 +232,8 @@ class SurfelRasterizer:
                                surfels.channels)
         scratch = self.workspace.get
         taken: list[wgpu.GPUBuffer] = []
-        tile_walk = self.raster_defines(surfels.channels)["TILE_WALK"]
+        layout = self.raster_defines(surfels.channels)
+        tile_walk = layout["TILE_WALK"]
 
         def kept(label, nbytes, usage=STORAGE):
             if not keep:
@@ -242,13 +256,16 @@ class SurfelRasterizer:
             sort_info=scratch("isect_sort.info", 16, INDIRECT),
             elem_info=scratch("isect_elem.info", 16, INDIRECT),
             kept=taken,
+            tile_walk=tile_walk,
+            walk_layout=layout["WALK_LAYOUT"],
         )
         ctx.write(st.params, params)
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
         p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups,
-                                                             "PIXEL_ROWS": tile_walk})
+                                                             "PIXEL_ROWS": tile_walk,
+                                                             "WALK_LAYOUT": st.walk_layout})
         resources = dict(enumerate([st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
                                     st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats]))
@@ -300,7 +317,7 @@ class SurfelRasterizer:
                                       take(4 * cap, "used_blocks", STORAGE))
             isect_tiles = records.isect_keys if records else self.workspace.get("isect_tiles", 4 * cap)
         keyed = {"RECORD_KEYS": records is not None}
-        defines = self.raster_defines(surfels.channels)
+        defines = {**self.raster_defines(surfels.channels), "TILE_WALK": st.tile_walk, "WALK_LAYOUT": st.walk_layout}
         subgroups = defines["USE_SUBGROUPS"]
         empty = self.workspace.get("empty", 64)
         if n > 0:
@@ -477,6 +494,8 @@ class SurfelRasterizer:
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
+        # As the forward rendered and laid out the surfels this pass reads.
+        defines.update(TILE_WALK=state.proj.tile_walk, WALK_LAYOUT=state.proj.walk_layout)
         # With records the backward's entry point is the tile walk (tile_walk_bwd.wgsl, the only writer of
         # records); with atomics each subgroup replays its own block.
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
@@ -525,6 +544,10 @@ class SurfelRasterizer:
             texels.bind_lease(resources, state.texel_lease)
         elif texels:
             texels.bind(enc, resources, state.proj.projected, state.proj.colors4, n)
+        if state.proj.walk_layout and not normal_depth:
+            # In the walks' layout colors4 holds only the normal and depth, which this variant does not read.
+            resources.pop(15, None)
+            resources.pop(COLORS_BINDING, None)
         self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
         outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                               ("v_opacities", 1))]

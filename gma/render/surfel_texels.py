@@ -1,7 +1,10 @@
 """The projected surfels and their colours as textures, for the tile walks' gathers (lavapipe).
 
 Per group of 8 intersections each lane of a tile walk (tile_walk_fwd.wgsl, tile_walk_bwd.wgsl) reads one
-surfel's projection (four vec4s) and colour (one vec4) at an index of its own. Lavapipe turns a storage
+surfel's projection and colour (five vec4s; the backward four) at an index of its own. The tile walks'
+projection writes them in its own layout (WALK_LAYOUT in project_fwd.wgsl; surfel_texels.wgsl): the
+``projected`` buffer's four vec4s per surfel are its T rows and its colour, the ``colors4`` buffer's vec4
+its normal and depth, so that the backward walk reads one cache line per surfel. Lavapipe turns a storage
 buffer read at a lane-varying index into a loop over the lanes with a bounds check and a branch per lane
 and component, whereas it fetches a texel of a storage texture for all lanes at once: a vec4 gather from
 a 16 MB table, sequential per lane, ran 2.0-2.3x faster from an rgba32float storage texture than from an
@@ -27,7 +30,8 @@ from dataclasses import dataclass
 
 import wgpu
 
-# Texels per row: 1024 surfels of 4 texels (t0, t1, t2, normal_depth), or 4096 colours. The shaders
+# Texels per row: 1024 surfels of 4 texels (t0, t1, t2, colour), or 4096 of colors4's vec4s (normal and
+# depth in the tile walks' layout). The shaders
 # address them with the same constant (texel_at in common/render_types.wgsl).
 TEXEL_ROW = 4096
 PROJECTED_TEXELS = 4

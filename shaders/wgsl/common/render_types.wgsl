@@ -46,7 +46,8 @@ struct ProjectedSurfel {
     t0: vec4<f32>,              // T row 0, mu2d.x
     t1: vec4<f32>,              // T row 1, mu2d.y
     t2: vec4<f32>,              // T row 2, opacity
-    normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth
+    normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth; in the tile
+                                // walks' buffers (WALK_LAYOUT, surfel_texels.wgsl) the colour vec4 instead
 };
 
 // Indirect-dispatch arguments followed by the element count they were derived from (16 bytes).

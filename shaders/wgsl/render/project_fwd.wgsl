@@ -23,6 +23,8 @@
 @group(0) @binding(10) var<storage, read_write> block_bands: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
+// Define WALK_LAYOUT (the tile walks', with TILE_WALK): `projected` holds each surfel's colour vec4 in place
+// of its normal and depth, and colors4 those (see the writes below and surfel_texels.wgsl).
 #if PIXEL_ROWS
 // For the forward tile walk (tile_walk_fwd.wgsl, TILE_WALK): the first and last pixel row of the surfel's box
 // (first | last << 16), from which it skips the rows of a block that the surfel cannot reach.
@@ -178,8 +180,6 @@ fn project_surfel(i: u32) -> vec2<u32> {
     let tile_hi = px_hi / TILE_SIZE;
     let extent = tile_hi - tile_lo + 1u;
 
-    projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
-                                   vec4<f32>(normal, mu_c.z));
 #if PIXEL_ROWS
     pixel_rows[i] = px_lo.y | (px_hi.y << 16u);
 #endif
@@ -190,9 +190,20 @@ fn project_surfel(i: u32) -> vec2<u32> {
     let last = nc - 1u;
     // With fewer than 4 channels the depth rides in the padding lane (the subgroup rasterizer's
     // DEPTH_IN_COLOR, rasterize_core.wgsl).
-    colors4[i] = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
+    let color4 = vec4<f32>(colors[i * nc], select(0.0, colors[i * nc + min(1u, last)], nc > 1u),
                            select(0.0, colors[i * nc + min(2u, last)], nc > 2u),
                            select(mu_c.z, colors[i * nc + min(3u, last)], nc > 3u));
+    let normal_depth = vec4<f32>(normal, mu_c.z);
+#if WALK_LAYOUT
+    // The tile walks' layout (surfel_texels.wgsl): the colour in the fourth vec4, beside the T rows in the
+    // surfel's 64 bytes, which the backward walk reads alone; the normal and depth in colors4.
+    projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity), color4);
+    colors4[i] = normal_depth;
+#else
+    projected[i] = ProjectedSurfel(vec4<f32>(t0, mu2d.x), vec4<f32>(t1, mu2d.y), vec4<f32>(t2, opacity),
+                                   normal_depth);
+    colors4[i] = color4;
+#endif
     let count = select(countOneBits(tiles.z), extent.x * extent.y, tiles.w != 0u);
     tile_counts[i] = count;
     let key = depth_key(mu_c.z);

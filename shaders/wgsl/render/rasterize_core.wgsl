@@ -16,7 +16,8 @@
 @group(0) @binding(4) var<storage, read> ranges: array<vec2<u32>>;            // [num_tiles]
 @group(0) @binding(5) var<storage, read> background: array<f32>;              // [CHANNELS]
 #if USE_SUBGROUPS
-@group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR)
+@group(0) @binding(15) var<storage, read> colors4: array<vec4<f32>>;          // [N] channels 0-3 (see DEPTH_IN_COLOR);
+                                                                              // with WALK_LAYOUT the normal and depth
 #if TILE_WALK
 @group(0) @binding(18) var<storage, read> pixel_rows: array<u32>;              // [N] see tile_quads
 #include "render/surfel_texels.wgsl"

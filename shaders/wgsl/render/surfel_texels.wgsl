@@ -1,19 +1,27 @@
 // The tile walks' reads of a surfel's projection and colour (included by rasterize_core.wgsl with
 // TILE_WALK). With SURFEL_TEXELS they come from storage textures that the rasterizer filled from the
 // buffers (gma/render/surfel_texels.py, which explains why: on lavapipe a texel fetch serves all lanes at
-// once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers. Layout
-// (texel_at): surfel i's t0, t1, t2, normal_depth are vec4s 4 i + 0..3, its colour vec4 i.
+// once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers.
+//
+// Define WALK_LAYOUT (SurfelRasterizer.use_walk_layout, on with the tile walks): projection wrote the walks'
+// layout (project_fwd.wgsl): a surfel's 64 bytes of `projected` hold its T rows (t0, t1, t2) and its colour
+// vec4 (channels 0-3, the depth in .w below 4 channels), and colors4 holds its normal and depth. The
+// backward walk reads only the first: one cache line per surfel instead of two (the standard layout has
+// the normal and depth beside the T rows and the colour in colors4). Standard scene, both in one process
+// (shader_ab.py, 14 rounds, twice): backward rasterize 0.920x and 0.898x with the colour read from the T
+// rows' line (timing only). Textures (texel_at): surfel i's four vec4s of `projected` are texels 4 i + 0..3
+// of one, its colors4 vec4 texel i of the other.
 
 #if SURFEL_TEXELS
 @group(0) @binding(20) var projected_texels: texture_storage_2d<rgba32float, read>;
-@group(0) @binding(21) var color_texels: texture_storage_2d<rgba32float, read>;
+@group(0) @binding(21) var color_texels: texture_storage_2d<rgba32float, read>;   // colors4's copy
 
-// Row k of surfel sid's projection (0: t0, 1: t1, 2: t2, 3: normal_depth).
+// Row k of surfel sid's projection (0-2: T rows; 3: see the layout above).
 fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {
     return textureLoad(projected_texels, texel_at(4u * sid + k));
 }
 
-fn load_color4(sid: u32) -> vec4<f32> {
+fn load_colors4_vec(sid: u32) -> vec4<f32> {
     return textureLoad(color_texels, texel_at(sid));
 }
 #else
@@ -26,12 +34,29 @@ fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {
     }
 }
 
-fn load_color4(sid: u32) -> vec4<f32> {
+fn load_colors4_vec(sid: u32) -> vec4<f32> {
     return colors4[sid];
 }
 #endif
 
+fn load_color4(sid: u32) -> vec4<f32> {
+#if WALK_LAYOUT
+    return load_projected_row(sid, 3u);
+#else
+    return load_colors4_vec(sid);
+#endif
+}
+
+fn load_normal_depth(sid: u32) -> vec4<f32> {
+#if WALK_LAYOUT
+    return load_colors4_vec(sid);
+#else
+    return load_projected_row(sid, 3u);
+#endif
+}
+
+// A surfel's projection as a ProjectedSurfel (its normal and depth in the fourth vec4).
 fn load_projected(sid: u32) -> ProjectedSurfel {
     return ProjectedSurfel(load_projected_row(sid, 0u), load_projected_row(sid, 1u), load_projected_row(sid, 2u),
-                           load_projected_row(sid, 3u));
+                           load_normal_depth(sid));
 }

@@ -191,7 +191,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) s
         let mine_t2 = load_projected_row(mine_sid, 2u);
         let mine_col = load_color4(mine_sid);
 #if NORMAL_DEPTH_GRADS
-        let mine_nd = load_projected_row(mine_sid, 3u);
+        let mine_nd = load_normal_depth(mine_sid);
 #endif
         for (var kk = 0u; kk < n; kk++) {
             let k = n - 1u - kk;   // back to front
