@@ -58,8 +58,7 @@ def _torch_simd() -> str:
     """", torch AVX512" and the like, where the script has imported torch (importing it here would cost a
     second for scripts that do not)."""
     torch = sys.modules.get("torch")
-    capability = getattr(getattr(getattr(torch, "backends", None), "cpu", None), "get_cpu_capability", None)
-    return f", torch {capability()}" if capability else ""
+    return f", torch {torch.backends.cpu.get_cpu_capability()}" if torch else ""
 
 
 def load_standard_workload():

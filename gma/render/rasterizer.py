@@ -232,8 +232,8 @@ class SurfelRasterizer:
                                surfels.channels)
         scratch = self.workspace.get
         taken: list[wgpu.GPUBuffer] = []
-        layout = self.raster_defines(surfels.channels)
-        tile_walk = layout["TILE_WALK"]
+        variant = self.raster_defines(surfels.channels)
+        tile_walk = variant["TILE_WALK"]
 
         def kept(label, nbytes, usage=STORAGE):
             if not keep:
@@ -257,7 +257,7 @@ class SurfelRasterizer:
             elem_info=scratch("isect_elem.info", 16, INDIRECT),
             kept=taken,
             tile_walk=tile_walk,
-            walk_layout=layout["WALK_LAYOUT"],
+            walk_layout=variant["WALK_LAYOUT"],
         )
         ctx.write(st.params, params)
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl

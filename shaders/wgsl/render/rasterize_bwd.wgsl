@@ -391,20 +391,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let mine_t0 = projected[mine_id].t0;
             let mine_t1 = projected[mine_id].t1;
             let mine_t2 = projected[mine_id].t2;
-#if WALK_LAYOUT
-            let mine_col = load_color4(mine_id);   // the tile walks' layout (surfel_texels.wgsl)
-#else
-            let mine_col = colors4[mine_id];
-#endif
+            let mine_col = load_color4(mine_id);   // in the layout projection wrote (surfel_texels.wgsl)
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
                 let idx = start + subgroupShuffle(mine_slot, k);   // local intersection index in the tile
 #if NORMAL_DEPTH_GRADS
-#if WALK_LAYOUT
                 let nd = subgroupShuffle(load_normal_depth(mine_id), k);
-#else
-                let nd = subgroupShuffle(projected[mine_id].normal_depth, k);
-#endif
 #else
                 let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
 #endif

@@ -20,8 +20,8 @@
                                                                               // with WALK_LAYOUT the normal and depth
 #if TILE_WALK
 @group(0) @binding(18) var<storage, read> pixel_rows: array<u32>;              // [N] see tile_quads
-#include "render/surfel_texels.wgsl"
 #endif
+#include "render/surfel_texels.wgsl"
 // Per subgroup (row sg_id * (BATCH + SG)): the batch's intersections whose block mask meets the
 // subgroup's blocks, each as its surfel id << 8 | its slot in the batch (hit_entry), then up to SG - 1
 // entries of scratch (see list_hits). Only the subgroup's own lanes

@@ -1,5 +1,6 @@
-// The tile walks' reads of a surfel's projection and colour (included by rasterize_core.wgsl with
-// TILE_WALK). With SURFEL_TEXELS they come from storage textures that the rasterizer filled from the
+// The subgroup rasterizers' reads of a surfel's projection and colour, by layout (included by
+// rasterize_core.wgsl with USE_SUBGROUPS; the tile walks read every surfel through them). With
+// SURFEL_TEXELS (tile walks only) they come from storage textures that the rasterizer filled from the
 // buffers (gma/render/surfel_texels.py, which explains why: on lavapipe a texel fetch serves all lanes at
 // once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers.
 //
