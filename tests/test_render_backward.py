@@ -195,6 +195,32 @@ def test_walk_layout_changes_nothing_and_the_backward_reads_its_forwards(gpu):
         assert np.abs(walked.colors).sum() > 0 and np.abs(walked.means).sum() > 0
 
 
+def test_tile_walks_give_the_same_results_whatever_their_thread_count(gpu):
+    """The tile walks take their tiles in an order spread over the driver's threads (walk_tile in
+    rasterize_core.wgsl): any thread count, including ones that do not divide the tile count and more
+    threads than tiles, gives bit for bit the images and gradients of workgroup w replaying tile w."""
+    if not SurfelRasterizer(gpu).use_grad_records:
+        pytest.skip("the tile walks serve lavapipe")
+    cam = default_camera(88, 72)   # 6 x 5 tiles
+    scene = torch_scene(1500, seed=33, spread=0.8, scale_range=(0.02, 0.15))
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+    up = random_upstream(cam, seed=4, which=("color", "alpha"))
+    results = []
+    for threads in (1, 2, 4, 7, 64):
+        rast = SurfelRasterizer(gpu)
+        rast.walk_threads = threads
+        state = rast.forward(buffers, cam)
+        results.append((read_outputs(gpu, state),
+                        rast.backward(state, buffers, up["color"], up["alpha"], None, None)))
+    (images, grads), others = results[0], results[1:]
+    for other_images, other_grads in others:
+        for k in ("color", "alpha", "normal", "depth"):
+            assert np.array_equal(getattr(images, k), getattr(other_images, k)), k
+        for k in NAMES:
+            assert np.array_equal(getattr(grads, k), getattr(other_grads, k)), k
+    assert images.alpha.min() < 0.5 < images.alpha.max() and np.abs(grads.means).sum() > 0
+
+
 def test_interleaved_renders_keep_their_own_texels(gpu):
     """A replayed render's surfel textures are its state's (TexelLease) until the state is gone: renders
     of other scenes between a forward and its backward change nothing, and given-back textures serve

@@ -95,6 +95,20 @@ class GpuContext:
         return "llvmpipe" in f"{info.get('vendor', '')} {info.get('device', '')}".lower()
 
     @property
+    def dispatch_threads(self) -> int:
+        """CPU threads that split a compute dispatch's workgroups between them: lavapipe's LP_NUM_THREADS,
+        by default one per CPU this process may run on (llvmpipe counts them so; at most LP_MAX_THREADS,
+        32); 1 on other adapters. A guess that only balances work (walk_tile in rasterize_core.wgsl)."""
+        if not self.is_lavapipe:
+            return 1
+        wanted = os.environ.get("LP_NUM_THREADS", "").strip()
+        if wanted.isdigit():
+            count = int(wanted)
+        else:
+            count = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return max(1, min(count, 32))
+
+    @property
     def has_float_atomics(self) -> bool:
         return "shader-float32-atomic" in self.features
 

@@ -161,6 +161,9 @@ class SurfelRasterizer:
         # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
         # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
         self.use_walk_layout = True
+        # The tile walks spread each of the driver's threads over the whole image (walk_tile in
+        # rasterize_core.wgsl); tests set other counts to check that the images and gradients stay the same.
+        self.walk_threads = ctx.dispatch_threads
         self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
 
@@ -229,7 +232,7 @@ class SurfelRasterizer:
             raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "
                              f"{MAX_IMAGE_SIDE} pixels per side")
         params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
-                               surfels.channels)
+                               surfels.channels, self.walk_threads)
         scratch = self.workspace.get
         taken: list[wgpu.GPUBuffer] = []
         variant = self.raster_defines(surfels.channels)

@@ -158,8 +158,8 @@ fn store_record(rec: u32, s: ProjectedSurfel, t: HitTotals, sg_lane: u32) {
 
 @compute @workgroup_size(8)   // one subgroup (SG = 8) per tile
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
-    let tile = wg.y * params.tile_grid.x + wg.x;
-    let origin = wg.xy * TILE_SIZE;
+    let tile = walk_tile(wg.xy);
+    let origin = vec2<u32>(tile % params.tile_grid.x, tile / params.tile_grid.x) * TILE_SIZE;
     var r0 = start_block_replay(origin, 0u, sg_lane);
     var r1 = start_block_replay(origin, 1u, sg_lane);
     var r2 = start_block_replay(origin, 2u, sg_lane);
