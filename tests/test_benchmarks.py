@@ -30,6 +30,8 @@ SMOKE: dict[str, list[str] | str] = {
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
     "shader_ab.py": ["{repo}/shaders/wgsl", "{repo}/shaders/wgsl", "--rounds", "2", "--count", "500"],
     "lavapipe_profile.py": ["--seconds", "2", "--count", "500", "--frequency", "499"],
+    "dispatch_split.py": ["--workgroups", "64", "--heavy", "100", "--repeats", "1", "--count", "500",
+                          "--size", "64"],
     "sort.py": ["--depth-keys", "3000", "--tile-keys", "5000", "--rounds", "2", "--repeat", "1"],
     "body_posing.py": ["--per-face", "1", "--frames", "2"],
     "synth.py": ["--size", "48", "--train-frames", "4", "--texture-size", "256"],

@@ -30,12 +30,15 @@
 var<workgroup> hit_entries: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 
 // The tile that a tile walk's workgroup `wg` replays (tile_walk_fwd.wgsl, tile_walk_bwd.wgsl). Lavapipe
-// hands each of its N threads one contiguous run of a dispatch's workgroups (the first N q, q = tiles / N
-// of them, then the rest one by one), and in row order one thread got the upper half of the image: on the
+// hands each of its N threads one contiguous run of a dispatch's workgroups (q = tiles / N of them each,
+// then the rest one by one), and in row order one thread got the upper half of the image: on the
 // avatar-like scene (100k surfels, 512 px) 59 % of the intersections, as a body's upper half holds more
-// surfels than its legs, so that the pass lasted as long as that thread's 59 %. Workgroup c q + k takes
-// tile k N + c instead: each thread gets every Nth tile, from all over the image. A permutation of the
-// tiles for any N (1: the identity, which GPUs get); a wrong N only balances less well.
+// surfels than its legs, and the pass lasted as long as that thread's share. So the runs take the tiles in
+// stretches of s = gcd(q, tiles per row) (whole rows where N divides the rows), dealt out in turn: run c's
+// k-th workgroup takes stretch (k / s) N + c at offset k % s. Each thread then gets every Nth row (or part
+// row) from all over the image, and neighbouring tiles, which share surfels, stay in one thread's cache.
+// (Dealing out single tiles balanced as well but cost a fit's training step 8 % at 256 px.) A permutation
+// of the tiles for any N (1: the identity, which GPUs get); a wrong N only balances less well.
 fn walk_tile(wg: vec2<u32>) -> u32 {
     let w = wg.y * params.tile_grid.x + wg.x;
     let n = max(params.walk_threads, 1u);
@@ -43,7 +46,15 @@ fn walk_tile(wg: vec2<u32>) -> u32 {
     if w >= q * n {
         return w;
     }
-    return (w % q) * n + w / q;
+    var s = params.tile_grid.x;   // gcd(q, tiles per row) by Euclid: a few steps, once per workgroup
+    var r = q;
+    while r != 0u {
+        let t = s % r;
+        s = r;
+        r = t;
+    }
+    let k = w % q;
+    return ((k / s) * n + w / q) * s + k % s;
 }
 
 // Votes, ballots and reductions over the subgroup from xor-shuffles. Lavapipe runs subgroupBallot,
