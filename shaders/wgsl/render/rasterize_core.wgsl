@@ -36,9 +36,9 @@ var<workgroup> hit_entries: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 // surfels than its legs, and the pass lasted as long as that thread's share. So the runs take the tiles in
 // stretches of s = gcd(q, tiles per row) (whole rows where N divides the rows), dealt out in turn: run c's
 // k-th workgroup takes stretch (k / s) N + c at offset k % s. Each thread then gets every Nth row (or part
-// row) from all over the image, and neighbouring tiles, which share surfels, stay in one thread's cache.
-// (Dealing out single tiles balanced as well but cost a fit's training step 8 % at 256 px.) A permutation
-// of the tiles for any N (1: the identity, which GPUs get); a wrong N only balances less well.
+// row) from all over the image, and neighbouring tiles, which share surfels, stay in one thread's cache
+// (avatar-like scene, one process: forward 0.898x, backward 0.922x; docs/design.md). A permutation of the
+// tiles for any N (1: the identity, which GPUs get); a wrong N only balances less well.
 fn walk_tile(wg: vec2<u32>) -> u32 {
     let w = wg.y * params.tile_grid.x + wg.x;
     let n = max(params.walk_threads, 1u);
