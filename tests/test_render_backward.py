@@ -206,7 +206,8 @@ def test_tile_walks_give_the_same_results_whatever_their_thread_count(gpu):
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
     up = random_upstream(cam, seed=4, which=("color", "alpha"))
     results = []
-    for threads in (1, 2, 4, 5, 7, 64):   # stretches (see walk_tile) of 3, 1, 6 (whole rows), 2 tiles
+    # 1: the identity; 2, 4, 5, 7: stretches (walk_tile) of 3, 1, 6 (whole rows) and 2 tiles; 64: > tiles
+    for threads in (1, 2, 4, 5, 7, 64):
         rast = SurfelRasterizer(gpu)
         rast.walk_threads = threads
         state = rast.forward(buffers, cam)

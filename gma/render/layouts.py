@@ -48,7 +48,7 @@ def tile_grid(width: int, height: int) -> tuple[int, int]:
 def render_params(viewmat: np.ndarray, K: np.ndarray, width: int, height: int, num_surfels: int,
                   isect_capacity: int, channels: int, walk_threads: int = 1) -> np.ndarray:
     """Pack one ``RenderParams`` uniform. ``viewmat`` [4, 4] world->camera, ``K`` [3, 3]; ``walk_threads``:
-    see ``walk_tile`` in render_types.wgsl (1: workgroup w replays tile w)."""
+    see ``walk_tile`` in rasterize_core.wgsl (1: workgroup w replays tile w)."""
     p = np.zeros((), RENDER_PARAMS)
     p["w2c"] = np.asarray(viewmat, np.float32)[:3, :4]
     p["k"][:, :3] = np.asarray(K, np.float32)
