@@ -13,7 +13,9 @@ back-to-back frames took 60 ms; the peer's 1.5 s steps hardly notice.) Prints me
 ``--baseline DIR`` also times another GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a
 worker process, interleaved the same way, so that a speed-up over our own earlier code is a ratio from
 one run too; ``--baseline . --baseline-env GMA_LAVAPIPE=system`` times this same code on the system's
-lavapipe instead of the newer one kept in GMA's cache (the worker's adapter is printed).
+lavapipe instead of the newer one kept in GMA's cache (the worker's adapter is printed), and
+``--baseline . --baseline-env OMP_WAIT_POLICY=passive`` with torch's OpenMP workers not spinning beside
+lavapipe's threads (README, "Environment"); the baseline's ratio to the peer is printed too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--burst 3] [--baseline DIR]
@@ -162,7 +164,8 @@ def main() -> int:
     print(f"adapter: {ctx.name}; machine: {machine()}; torch threads: {torch.get_num_threads()}")
     print(f"{'':>25} {'steady (steps 2.. of a turn)':^27} | {'after idle (first step)':^27}")
     print(f"{'N':>7} {'pass':<17} {'GMA ms':>9} {'peer ms':>9} {'ratio':>7} | {'GMA ms':>9} {'peer ms':>9} "
-          f"{'ratio':>7}" + (f" {'baseline ms':>12} {'GMA/baseline':>13}" if args.baseline else ""))
+          f"{'ratio':>7}" + (f" {'baseline ms':>12} {'GMA/baseline':>13} {'peer/baseline':>14}" if args.baseline
+                             else ""))
     rows = []
     for n in args.counts:
         t = scene_tensors(workload, n)
@@ -189,10 +192,10 @@ def main() -> int:
             b = _steady(baseline)
             name = "forward+backward" if backward else "forward"
             print(f"{n:>7} {name:<17} {g:9.1f} {p:9.1f} {p / g:6.1f}x | {g1:9.1f} {p1:9.1f} {p1 / g1:6.1f}x"
-                  + (f" {b:12.1f} {g / b:13.2f}" if base else ""))
+                  + (f" {b:12.1f} {g / b:13.2f} {p / b:13.1f}x" if base else ""))
             rows.append({"n": n, "pass": name, "gma_ms": g, "peer_ms": p, "ratio": p / g, "gma_first_ms": g1,
                          "peer_first_ms": p1, "ratio_first": p1 / g1, "gma_runs": gma, "peer_runs": peer,
-                         "baseline_ms": b, "baseline_runs": baseline})
+                         "baseline_ms": b, "baseline_runs": baseline, "ratio_baseline": p / b if base else None})
         ours.close()
         if base:
             base.close()
