@@ -1,14 +1,16 @@
 #!/usr/bin/env python3
-"""How the driver shares a compute dispatch between its CPU threads, and what the tile walks' tile order
-(``walk_tile`` in shaders/wgsl/render/rasterize_core.wgsl) makes of it.
+"""How the driver shares a compute dispatch between its CPU threads, and what the renderer's work queues
+(shaders/wgsl/common/work_queue.wgsl) make of it.
 
-1. A probe kernel: W workgroups, half of them looping ``--heavy`` times and the rest 10 times, the heavy
-   half either first (workgroups 0..W/2) or every other workgroup. A driver that hands out workgroups one
-   at a time takes about as long for both; lavapipe, which gives each of its N threads one contiguous run
-   of ~W/N workgroups, takes about twice as long when the heavy half comes first.
+1. A probe kernel: W work items, half of them looping ``--heavy`` times and the rest 10 times, the heavy
+   half either first (items 0..W/2) or every other item, run as one workgroup per item and, with
+   subgroups, as one workgroup per driver thread taking items from a queue (``take_work``). A driver that
+   hands out workgroups one at a time takes about as long for both orders; lavapipe, which gives each of
+   its N threads one contiguous run of ~W/N workgroups, takes about twice as long when the heavy half
+   comes first, unless the items come from the queue.
 2. A scene's tile lists: the share of its intersections that falls into the busiest thread's run when
-   workgroup w replays tile w (row order) and in walk_tile's order, for the driver's thread count
-   (``GpuContext.dispatch_threads``). A tile walk lasts about as long as its busiest thread.
+   workgroup w replays tile w (row order), for the driver's thread count (``GpuContext.dispatch_threads``).
+   Without a queue a tile walk lasts about as long as its busiest thread.
 
     python benchmarks/dispatch_split.py [--workgroups 1024] [--heavy 20000] [--repeats 5]
                                         [--scene avatar|standard] [--count 100000] [--size 512]
@@ -17,7 +19,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import sys
 import time
@@ -30,6 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine, scene_and_camera  # noqa: E402
 
 from gma.gpu import get_context  # noqa: E402
+from gma.gpu.shaders import ShaderLibrary  # noqa: E402
 from gma.render import SurfelRasterizer  # noqa: E402
 from gma.render.layouts import tile_grid  # noqa: E402
 from gma.render.surfels import SurfelBuffers  # noqa: E402
@@ -37,36 +39,66 @@ from gma.render.surfels import SurfelBuffers  # noqa: E402
 PROBE = """
 @group(0) @binding(0) var<storage, read_write> out: array<f32>;
 @group(0) @binding(1) var<uniform> setup: vec4<u32>;   // heavy first?, workgroups, heavy loop trips
-@compute @workgroup_size(8)
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let heavy = select((wg.x % 2u) == 0u, wg.x < setup.y / 2u, setup.x == 1u);
+
+fn item(w: u32, lid: u32) {
+    let heavy = select((w % 2u) == 0u, w < setup.y / 2u, setup.x == 1u);
     var x = f32(lid);
     for (var i = 0u; i < select(10u, setup.z, heavy); i++) {
         x = x * 0.999 + 0.5;
     }
-    out[wg.x * 8u + lid] = x;
+    out[w * 8u + lid] = x;
 }
+
+#if WORK_QUEUE
+@group(0) @binding(2) var<storage, read_write> work_queue: array<atomic<u32>>;
+#include "common/work_queue.wgsl"
+
+@compute @workgroup_size(8)
+fn main(@builtin(subgroup_invocation_id) sg_lane: u32, @builtin(local_invocation_index) lid: u32) {
+    loop {
+        let w = take_work(1u, sg_lane);
+        if w >= setup.y {
+            break;
+        }
+        item(w, lid);
+    }
+}
+#else
+@compute @workgroup_size(8)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    item(wg.x, lid);
+}
+#endif
 """
 
 
 def probe_ms(ctx, workgroups: int, heavy: int, repeats: int) -> dict[str, float]:
-    """Median ms of the probe dispatch with the heavy half first and interleaved."""
-    pipeline = ctx.device.create_compute_pipeline(
-        layout=wgpu.AutoLayoutMode.auto,
-        compute={"module": ctx.device.create_shader_module(code=PROBE), "entry_point": "main"})
+    """Median ms of the probe with the heavy half first and interleaved, one workgroup per item, and with
+    the heavy half first from a queue (where the adapter has subgroups)."""
+    library = ShaderLibrary()
     out = ctx.buffer(32 * workgroups, "probe.out")
+    counter = ctx.buffer(16, "probe.queue")
     result = {}
-    for name, first in (("heavy half first", 1), ("heavy every other", 0)):
+    runs = [("heavy half first", 1, False), ("heavy every other", 0, False)]
+    if ctx.has_subgroups:
+        runs.append(("heavy half first, queued", 1, True))
+    for name, first, queued in runs:
+        code = library.source_text(PROBE, {"WORK_QUEUE": queued})
+        pipeline = ctx.device.create_compute_pipeline(
+            layout=wgpu.AutoLayoutMode.auto,
+            compute={"module": ctx.device.create_shader_module(code=code), "entry_point": "main"})
         setup = ctx.upload(np.array([first, workgroups, heavy, 0], np.uint32), "probe.setup",
                            wgpu.BufferUsage.UNIFORM | wgpu.BufferUsage.COPY_DST)
-        group = ctx.bind_group(pipeline, [out, setup])
+        group = ctx.bind_group(pipeline, [out, setup] + ([counter] if queued else []))
         times = []
         for _ in range(repeats + 1):   # the first compiles and warms up
             enc = ctx.device.create_command_encoder()
+            if queued:
+                enc.clear_buffer(counter, 0, 16)
             cp = enc.begin_compute_pass()
             cp.set_pipeline(pipeline)
             cp.set_bind_group(0, group)
-            cp.dispatch_workgroups(workgroups)
+            cp.dispatch_workgroups(ctx.dispatch_threads if queued else workgroups)
             cp.end()
             t0 = time.perf_counter()
             ctx.submit(enc)
@@ -74,18 +106,6 @@ def probe_ms(ctx, workgroups: int, heavy: int, repeats: int) -> dict[str, float]
             times.append((time.perf_counter() - t0) * 1e3)
         result[name] = statistics.median(times[1:])
     return result
-
-
-def walk_order(tiles_x: int, tiles_y: int, threads: int) -> np.ndarray:
-    """walk_tile's tile for every workgroup (numpy mirror of the WGSL function)."""
-    tiles = tiles_x * tiles_y
-    w = np.arange(tiles)
-    q = tiles // threads
-    if q == 0:
-        return w
-    s = math.gcd(q, tiles_x)
-    k = w % q
-    return np.where(w < q * threads, ((k // s) * threads + w // q) * s + k % s, w)
 
 
 def busiest_share(hits_by_workgroup: np.ndarray, threads: int) -> float:
@@ -118,8 +138,10 @@ def main() -> int:
     print(f"adapter: {ctx.name}; {machine()}; threads splitting a dispatch (as GMA assumes): {threads}")
     times = probe_ms(ctx, args.workgroups, args.heavy, args.repeats)
     first, interleaved = times["heavy half first"], times["heavy every other"]
-    print(f"probe, {args.workgroups} workgroups: heavy half first {first:.2f} ms, heavy every other "
-          f"{interleaved:.2f} ms ({first / interleaved:.2f}x)")
+    queued = times.get("heavy half first, queued")
+    print(f"probe, {args.workgroups} items: heavy half first {first:.2f} ms, heavy every other "
+          f"{interleaved:.2f} ms ({first / interleaved:.2f}x)"
+          + (f"; heavy half first from a queue {queued:.2f} ms ({queued / interleaved:.2f}x)" if queued else ""))
 
     scene, cam = scene_and_camera(args.count, args.scene, args.size)
     rast = SurfelRasterizer(ctx)
@@ -130,10 +152,8 @@ def main() -> int:
     ranges = ctx.read_many([(state.tile_ranges, np.uint32, 2 * tx * ty)])[0].reshape(-1, 2).astype(np.int64)
     hits = ranges[:, 1] - ranges[:, 0]
     for n in sorted({2, threads}):
-        row = busiest_share(hits, n)
-        walked = busiest_share(hits[walk_order(tx, ty, n)], n)
         print(f"{args.scene} scene, {int(hits.sum())} intersections in {tx}x{ty} tiles, {n} threads: busiest "
-              f"thread's share {row:.1%} in row order, {walked:.1%} in walk_tile's (even: {1 / n:.1%})")
+              f"thread's share {busiest_share(hits, n):.1%} in row order (even: {1 / n:.1%})")
     return 0
 
 

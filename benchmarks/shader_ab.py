@@ -9,8 +9,10 @@ B / A, and the images' and gradients' sums (equal sums: the change kept them, ve
     cp -r shaders/wgsl /tmp/a && cp -r shaders/wgsl /tmp/b   # then edit /tmp/b
     python benchmarks/shader_ab.py /tmp/a /tmp/b [--rounds 16] [--count 100000] [--scene avatar] [--size 512]
 
-Only the shaders differ: the Python side is this checkout's. Without ../shared's standard scene it renders
-a random scene of --count surfels. ``--scene avatar`` renders avatar-like surfels instead (small, tangent to
+Only the shaders differ: the Python side is this checkout's. ``--toggle ATTR`` instead renders with this
+checkout's shaders both times and a ``SurfelRasterizer`` switch off (A) and on (B), e.g.
+``python benchmarks/shader_ab.py --toggle use_work_queues --scene avatar``. Without ../shared's standard scene
+it renders a random scene of --count surfels. ``--scene avatar`` renders avatar-like surfels instead (small, tangent to
 a body-shaped surface; gma.render.scenes) at --size pixels square.
 """
 
@@ -26,15 +28,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import PASSES, machine, pass_inputs, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
-from gma.gpu.shaders import ShaderLibrary  # noqa: E402
+from gma.gpu.shaders import ShaderLibrary, shader_root  # noqa: E402
 from gma.render import SurfelRasterizer, read_outputs  # noqa: E402
 from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("a", help="shader directory A (like shaders/wgsl)")
-    p.add_argument("b", help="shader directory B")
+    p.add_argument("a", nargs="?", help="shader directory A (like shaders/wgsl)")
+    p.add_argument("b", nargs="?", help="shader directory B")
+    p.add_argument("--toggle", metavar="ATTR", help="a SurfelRasterizer switch, off in A and on in B (no directories)")
     p.add_argument("--rounds", type=int, default=16)
     p.add_argument("--count", type=int, default=100000, help="surfels of the scene")
     p.add_argument("--scene", choices=("standard", "avatar"), default="standard")
@@ -49,7 +52,13 @@ def main() -> int:
     if not 1 <= args.count <= MAX_SURFELS:
         print(f"--count {args.count}: must lie in 1..{MAX_SURFELS} (the renderer's surfel limit)", file=sys.stderr)
         return 2
-    dirs = [Path(args.a), Path(args.b)]
+    if (args.toggle is None) == (args.a is None or args.b is None) or (args.a is None) != (args.b is None):
+        print("give two shader directories, or --toggle ATTR without them", file=sys.stderr)
+        return 2
+    dirs = [shader_root()] * 2 if args.toggle else [Path(args.a), Path(args.b)]
+    if args.toggle and not isinstance(getattr(SurfelRasterizer(get_context()), args.toggle, None), bool):
+        print(f"--toggle {args.toggle}: not a switch of SurfelRasterizer", file=sys.stderr)
+        return 2
     for d in dirs:
         if not (d / "render" / "rasterize_fwd.wgsl").is_file():
             print(f"{d}: not a shader directory (no render/rasterize_fwd.wgsl)", file=sys.stderr)
@@ -60,6 +69,9 @@ def main() -> int:
     surfels, upstream = pass_inputs(ctx, scene, cam)
     # Each directory gets its own shader library and pipeline cache; the context switches between them.
     setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx)) for d in dirs]
+    if args.toggle:
+        for i, (_, _, rast) in enumerate(setups):
+            setattr(rast, args.toggle, bool(i))
     timer = PassTimer(ctx)
     times: list[list[dict]] = [[], []]
     sums: list[tuple] = [(), ()]

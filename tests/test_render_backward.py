@@ -195,21 +195,21 @@ def test_walk_layout_changes_nothing_and_the_backward_reads_its_forwards(gpu):
         assert np.abs(walked.colors).sum() > 0 and np.abs(walked.means).sum() > 0
 
 
-def test_tile_walks_give_the_same_results_whatever_their_thread_count(gpu):
-    """The tile walks take their tiles in an order spread over the driver's threads (walk_tile in
-    rasterize_core.wgsl): any thread count, including ones that do not divide the tile count and more
-    threads than tiles, gives bit for bit the images and gradients of workgroup w replaying tile w."""
+def test_work_queues_give_the_same_results_whatever_their_workgroup_count(gpu):
+    """On lavapipe projection, the tile walks and project_bwd take their work from a queue, one workgroup
+    per driver thread (common/work_queue.wgsl): any workgroup count, including more than there are tiles,
+    gives bit for bit the images and gradients of one workgroup per tile and per 256 surfels."""
     if not SurfelRasterizer(gpu).use_grad_records:
-        pytest.skip("the tile walks serve lavapipe")
+        pytest.skip("the work queues serve lavapipe")
     cam = default_camera(88, 72)   # 6 x 5 tiles
     scene = torch_scene(1500, seed=33, spread=0.8, scale_range=(0.02, 0.15))
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
     up = random_upstream(cam, seed=4, which=("color", "alpha"))
     results = []
-    # 1: the identity; 2, 4, 5, 7: stretches (walk_tile) of 3, 1, 6 (whole rows) and 2 tiles; 64: > tiles
-    for threads in (1, 2, 4, 5, 7, 64):
+    for queued, workgroups in ((False, 1), (True, 1), (True, 2), (True, 5), (True, 64)):
         rast = SurfelRasterizer(gpu)
-        rast.walk_threads = threads
+        assert rast.use_work_queues
+        rast.use_work_queues, rast.queue_workgroups = queued, workgroups
         state = rast.forward(buffers, cam)
         results.append((read_outputs(gpu, state),
                         rast.backward(state, buffers, up["color"], up["alpha"], None, None)))

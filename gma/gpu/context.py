@@ -98,7 +98,8 @@ class GpuContext:
     def dispatch_threads(self) -> int:
         """CPU threads that split a compute dispatch's workgroups between them: lavapipe's LP_NUM_THREADS,
         by default one per CPU this process may run on (llvmpipe counts them so; at most LP_MAX_THREADS,
-        32); 1 on other adapters. A guess that only balances work (walk_tile in rasterize_core.wgsl)."""
+        32); 1 on other adapters. The workgroups of a pass that takes its work from a queue
+        (common/work_queue.wgsl): a wrong count only leaves a thread idle or gives it nothing to take."""
         if not self.is_lavapipe:
             return 1
         wanted = os.environ.get("LP_NUM_THREADS", "").strip()

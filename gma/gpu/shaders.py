@@ -98,6 +98,18 @@ class ShaderLibrary:
 
     def source(self, rel: str, defines: dict | None = None) -> str:
         """Full source of ``rel``: defines first, then the file with every include inlined once."""
+        return self._expand(rel, defines)
+
+    def source_text(self, text: str, defines: dict | None = None) -> str:
+        """Like :meth:`source` for WGSL held in a string (a benchmark's probe kernel), whose includes are
+        this library's files."""
+        self._text["<text>"] = text
+        try:
+            return self._expand("<text>", defines)
+        finally:
+            del self._text["<text>"]
+
+    def _expand(self, rel: str, defines: dict | None) -> str:
         seen: set[str] = set()
 
         def expand(name: str, stack: tuple[str, ...]) -> list[str]:

@@ -22,7 +22,7 @@ RENDER_PARAMS = np.dtype(
         ("num_surfels", "<u4"),
         ("isect_capacity", "<u4"),
         ("num_channels", "<u4"),
-        ("walk_threads", "<u4"),     # threads the CPU driver splits a tile walk over (walk_tile)
+        ("reserved", "<u4"),
     ]
 )
 assert RENDER_PARAMS.itemsize == 128
@@ -46,9 +46,8 @@ def tile_grid(width: int, height: int) -> tuple[int, int]:
 
 
 def render_params(viewmat: np.ndarray, K: np.ndarray, width: int, height: int, num_surfels: int,
-                  isect_capacity: int, channels: int, walk_threads: int = 1) -> np.ndarray:
-    """Pack one ``RenderParams`` uniform. ``viewmat`` [4, 4] world->camera, ``K`` [3, 3]; ``walk_threads``:
-    see ``walk_tile`` in rasterize_core.wgsl (1: workgroup w replays tile w)."""
+                  isect_capacity: int, channels: int) -> np.ndarray:
+    """Pack one ``RenderParams`` uniform. ``viewmat`` [4, 4] world->camera, ``K`` [3, 3]."""
     p = np.zeros((), RENDER_PARAMS)
     p["w2c"] = np.asarray(viewmat, np.float32)[:3, :4]
     p["k"][:, :3] = np.asarray(K, np.float32)
@@ -57,5 +56,4 @@ def render_params(viewmat: np.ndarray, K: np.ndarray, width: int, height: int, n
     p["num_surfels"] = num_surfels
     p["isect_capacity"] = isect_capacity
     p["num_channels"] = channels
-    p["walk_threads"] = max(1, int(walk_threads))
     return p

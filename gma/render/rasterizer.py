@@ -161,9 +161,12 @@ class SurfelRasterizer:
         # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
         # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
         self.use_walk_layout = True
-        # The tile walks spread each of the driver's threads over the whole image (walk_tile in
-        # rasterize_core.wgsl); tests set other counts to check that the images and gradients stay the same.
-        self.walk_threads = ctx.dispatch_threads
+        # On lavapipe projection, the tile walks and project_bwd take their work from a queue, one workgroup
+        # per driver thread (common/work_queue.wgsl), instead of one contiguous share of the workgroups per
+        # thread; tests switch it off and set other workgroup counts to check that the images and gradients
+        # stay the same, benchmarks to time it.
+        self.use_work_queues = ctx.is_lavapipe
+        self.queue_workgroups = ctx.dispatch_threads
         self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
 
@@ -189,6 +192,7 @@ class SurfelRasterizer:
             tile_walk = sg == 8 and self.use_tile_walk
             defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=tile_walk,
                            WALK_LAYOUT=tile_walk and self.use_walk_layout)
+        defines["WORK_QUEUE"] = defines["TILE_WALK"] and self.use_work_queues
         return defines
 
     def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
@@ -211,6 +215,18 @@ class SurfelRasterizer:
             cp.dispatch_workgroups(*groups)
         cp.end()
 
+    def _groups(self, encoder, resources: dict, queued: bool, binding: int, groups: tuple[int, int, int]
+                ) -> tuple[int, int, int]:
+        """The workgroups of a dispatch: ``groups``, or for a pass that takes its work from a queue
+        (common/work_queue.wgsl) one per driver thread, with the queue's counter at ``binding``, cleared here
+        (the queue runs the clear and the pass in order, so passes of other renders between do not matter)."""
+        if not queued:
+            return groups
+        counter = self.workspace.get("work_queue", 16)
+        encoder.clear_buffer(counter, 0, 16)
+        resources[binding] = counter
+        return (max(1, self.queue_workgroups), 1, 1)
+
     @staticmethod
     def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer, pixel_rows: wgpu.GPUBuffer | None = None) -> None:
         """The subgroup rasterizers (forward and backward) read the colours padded to a vec4 that
@@ -232,7 +248,7 @@ class SurfelRasterizer:
             raise ValueError(f"a {camera.width}x{camera.height} image exceeds this renderer's limit of "
                              f"{MAX_IMAGE_SIDE} pixels per side")
         params = render_params(camera.viewmat, camera.K, camera.width, camera.height, n, capacity,
-                               surfels.channels, self.walk_threads)
+                               surfels.channels)
         scratch = self.workspace.get
         taken: list[wgpu.GPUBuffer] = []
         variant = self.raster_defines(surfels.channels)
@@ -266,15 +282,18 @@ class SurfelRasterizer:
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
+        queued = self.project_subgroups and self.use_work_queues   # the queue's variant uses subgroups
         p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups,
                                                              "PIXEL_ROWS": tile_walk,
-                                                             "WALK_LAYOUT": st.walk_layout})
+                                                             "WALK_LAYOUT": st.walk_layout,
+                                                             "WORK_QUEUE": queued})
         resources = dict(enumerate([st.params, surfels.means, surfels.quats, surfels.scales, surfels.opacities,
                                     st.projected, st.tile_rects, st.tile_counts, st.depth_keys,
                                     st.depth_order, st.block_bands, surfels.colors, st.colors4, st.stats]))
         if tile_walk:
             resources[14] = st.pixel_rows
-        self._dispatch(encoder, p, resources, ((n + 255) // 256, 1, 1), "project", timer)
+        groups = self._groups(encoder, resources, queued, 15, ((n + 255) // 256, 1, 1))
+        self._dispatch(encoder, p, resources, groups, "project", timer)
         return st
 
     def depth_order(self, encoder, st: ProjectionState, n: int, key_bits: int = DEPTH_KEY_BITS,
@@ -360,7 +379,8 @@ class SurfelRasterizer:
             self._subgroup_inputs(resources, st.colors4 if n else empty,
                                   (st.pixel_rows if n else empty) if defines["TILE_WALK"] else None)
         lease = texels.bind(encoder, resources, st.projected, st.colors4, n, lease=replay) if texels else None
-        self._dispatch(encoder, raster, resources, (tx, ty, 1), "rasterize", timer)
+        groups = self._groups(encoder, resources, defines["WORK_QUEUE"], 24, (tx, ty, 1))
+        self._dispatch(encoder, raster, resources, groups, "rasterize", timer)
         return isect_ids, ranges, records, lease
 
     def _texels_for(self, defines: dict, n: int) -> SurfelTexels | None:
@@ -503,6 +523,8 @@ class SurfelRasterizer:
         # records); with atomics each subgroup replays its own block.
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
                        GRAD_RECORDS=records is not None)
+        # (Only the tile walk, the entry point with records, takes its tiles from a queue.)
+        defines["WORK_QUEUE"] = records is not None and state.proj.tile_walk and self.use_work_queues
         texels = self._texels_for(defines, n) if records is not None else None
         defines["SURFEL_TEXELS"] = texels is not None
         # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
@@ -551,7 +573,8 @@ class SurfelRasterizer:
             # In the walks' layout colors4 holds only the normal and depth, which this variant does not read.
             resources.pop(15, None)
             resources.pop(COLORS_BINDING, None)
-        self._dispatch(enc, raster, resources, (tx, ty, 1), "rasterize_bwd", timer)
+        groups = self._groups(enc, resources, defines["WORK_QUEUE"], 24, (tx, ty, 1))
+        self._dispatch(enc, raster, resources, groups, "rasterize_bwd", timer)
         outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
                                                               ("v_opacities", 1))]
         recycled += outs
@@ -568,8 +591,10 @@ class SurfelRasterizer:
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "RECORD_TEXELS": use_record_texels, "NORMAL_DEPTH_GRADS": normal_depth,
                         "COLORS_OUT": colors_out, "CHANNELS": c}
-        proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out else None)
-        self._dispatch(enc, proj, proj_resources, ((n + 255) // 256, 1, 1), "project_bwd", timer)
+        proj_defines["WORK_QUEUE"] = queued = self.use_work_queues and self.ctx.has_subgroups
+        proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out or queued else None)
+        groups = self._groups(enc, proj_resources, queued, 14, ((n + 255) // 256, 1, 1))
+        self._dispatch(enc, proj, proj_resources, groups, "project_bwd", timer)
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)

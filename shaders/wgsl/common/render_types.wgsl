@@ -37,7 +37,7 @@ struct RenderParams {
     num_surfels: u32,
     isect_capacity: u32,        // size of the intersection buffers
     num_channels: u32,
-    walk_threads: u32,          // threads a CPU driver splits a tile walk's workgroups over (walk_tile)
+    reserved: u32,
 };
 
 // One projected surfel as the rasterizer needs it (64 bytes). T is the 3x3 ray transform

@@ -60,6 +60,39 @@ fn cull(i: u32) {
 // With subgroups (chosen by the adapter's feature, not by the rasterizer variant): subgroup reductions,
 // then one lane adds the subgroup's share. On CPU drivers workgroup atomics are scalar loops over the
 // lanes: three per surfel cost 4.5 ms of the standard scene's 6 ms projection on lavapipe.
+#if WORK_QUEUE
+@group(0) @binding(15) var<storage, read_write> work_queue: array<atomic<u32>>;
+#include "common/work_queue.wgsl"
+
+// One workgroup per driver thread (common/work_queue.wgsl): each subgroup projects chunks of QUEUE_CHUNK
+// surfels until none is left, and adds its totals to stats once.
+@compute @workgroup_size(256)
+fn main(@builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_size) sg_size: u32) {
+    var count = 0u;
+    var lo = CULLED_KEY;
+    var hi = 0u;
+    loop {
+        let first = take_work(QUEUE_CHUNK, sg_lane);
+        if first >= params.num_surfels {
+            break;
+        }
+        for (var j = 0u; j < QUEUE_CHUNK; j += sg_size) {
+            let q = project_if_any(first + j + sg_lane);
+            count += q.y;
+            lo = min(lo, select(CULLED_KEY, q.x, q.y != 0u));
+            hi = max(hi, select(0u, q.x, q.y != 0u));
+        }
+    }
+    count = subgroupAdd(count);
+    lo = subgroupMin(lo);
+    hi = subgroupMax(hi);
+    if sg_lane == 0u {
+        atomicAdd(&stats[1], count);
+        atomicMin(&stats[2], lo);
+        atomicMax(&stats[3], hi);
+    }
+}
+#else
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
     let r = project_if_any(gid.x);
@@ -72,6 +105,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(subgroup_invocat
         atomicMax(&stats[3], hi);
     }
 }
+#endif
 #else
 @compute @workgroup_size(256)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {

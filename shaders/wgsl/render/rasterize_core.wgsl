@@ -29,33 +29,12 @@
 // program order (this variant serves CPU drivers only).
 var<workgroup> hit_entries: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 
-// The tile that a tile walk's workgroup `wg` replays (tile_walk_fwd.wgsl, tile_walk_bwd.wgsl). Lavapipe
-// hands each of its N threads one contiguous run of a dispatch's workgroups (q = tiles / N of them each,
-// then the rest one by one), and in row order one thread got the upper half of the image: on the
-// avatar-like scene (100k surfels, 512 px) 59 % of the intersections, as a body's upper half holds more
-// surfels than its legs, and the pass lasted as long as that thread's share. So the runs take the tiles in
-// stretches of s = gcd(q, tiles per row) (whole rows where N divides the rows), dealt out in turn: run c's
-// k-th workgroup takes stretch (k / s) N + c at offset k % s. Each thread then gets every Nth row (or part
-// row) from all over the image, and neighbouring tiles, which share surfels, stay in one thread's cache
-// (avatar-like scene, one process: forward 0.898x, backward 0.922x; docs/design.md). A permutation of the
-// tiles for any N (1: the identity, which GPUs get); a wrong N only balances less well.
-fn walk_tile(wg: vec2<u32>) -> u32 {
-    let w = wg.y * params.tile_grid.x + wg.x;
-    let n = max(params.walk_threads, 1u);
-    let q = (params.tile_grid.x * params.tile_grid.y) / n;
-    if w >= q * n {
-        return w;
-    }
-    var s = params.tile_grid.x;   // gcd(q, tiles per row) by Euclid: a few steps, once per workgroup
-    var r = q;
-    while r != 0u {
-        let t = s % r;
-        s = r;
-        r = t;
-    }
-    let k = w % q;
-    return ((k / s) * n + w / q) * s + k % s;
-}
+#if WORK_QUEUE
+// The tile walks' queue of tiles (common/work_queue.wgsl): one workgroup per driver thread, each taking
+// the next tile, in row order, until none is left.
+@group(0) @binding(24) var<storage, read_write> work_queue: array<atomic<u32>>;
+#include "common/work_queue.wgsl"
+#endif
 
 // Votes, ballots and reductions over the subgroup from xor-shuffles. Lavapipe runs subgroupBallot,
 // subgroupAny, subgroupAll and subgroupOr/Max as a loop over the lanes whose counter and result live in
