@@ -196,9 +196,9 @@ def test_walk_layout_changes_nothing_and_the_backward_reads_its_forwards(gpu):
 
 
 def test_work_queues_give_the_same_results_whatever_their_workgroup_count(gpu):
-    """On lavapipe projection, the tile walks and project_bwd take their work from a queue, one workgroup
-    per driver thread (common/work_queue.wgsl): any workgroup count, including more than there are tiles,
-    gives bit for bit the images and gradients of one workgroup per tile and per 256 surfels."""
+    """On lavapipe projection, emission, the tile walks and project_bwd take their work from a queue, one
+    workgroup per driver thread (common/work_queue.wgsl): any workgroup count, including more than there
+    are tiles, gives bit for bit the images and gradients of one workgroup per tile and per 256 surfels."""
     if not SurfelRasterizer(gpu).use_grad_records:
         pytest.skip("the work queues serve lavapipe")
     cam = default_camera(88, 72)   # 6 x 5 tiles

@@ -161,8 +161,8 @@ class SurfelRasterizer:
         # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
         # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
         self.use_walk_layout = True
-        # On lavapipe projection, the tile walks and project_bwd take their work from a queue, one workgroup
-        # per driver thread (common/work_queue.wgsl), instead of one contiguous share of the workgroups per
+        # On lavapipe projection, emission, the tile walks and project_bwd take their work from a queue, one
+        # workgroup per driver thread (common/work_queue.wgsl), instead of one contiguous share of the workgroups per
         # thread; tests switch it off and set other workgroup counts to check that the images and gradients
         # stay the same, benchmarks to time it.
         self.use_work_queues = ctx.is_lavapipe
@@ -344,7 +344,9 @@ class SurfelRasterizer:
         empty = self.workspace.get("empty", 64)
         if n > 0:
             self._setup(encoder, st, timer)
-            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups})
+            queued = subgroups and self.use_work_queues   # the queue's variant is the subgroup one
+            emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups,
+                                                                     "WORK_QUEUE": queued})
             # Emission writes scratch lists that the tile sort reads, and the sort writes the kept ones
             # (no copy back after its one pass on lavapipe: gpu_sort.py); one spare entry past the capacity
             # takes the subgroup variant's stores of tiles it does not list (emit_isects.wgsl).
@@ -355,7 +357,8 @@ class SurfelRasterizer:
                 emit_resources[7] = records.record_base
             if subgroups:
                 emit_resources[8] = st.block_bands
-            self._dispatch(encoder, emit, emit_resources, ((n + 255) // 256, 1, 1), "bin", timer)
+            groups = self._groups(encoder, emit_resources, queued, 9, ((n + 255) // 256, 1, 1))
+            self._dispatch(encoder, emit, emit_resources, groups, "bin", timer)
             self.sorter.encode(encoder, st.sort_info, isect_tiles, isect_ids, cap, _bits_for(tx * ty), timer,
                                source=emitted)
             rng = ctx.compute_pipeline("render/tile_ranges.wgsl", keyed)  # writes every tile's range
