@@ -52,32 +52,12 @@ fn isect_key(t: vec2<u32>, number: u32) -> u32 {
 // this pass 7.74 -> 6.47 ms (0.835x; the block bits' divisions 0.90x, the uniform steps 0.945x).
 #if WORK_QUEUE
 @group(0) @binding(9) var<storage, read_write> work_queue: array<atomic<u32>>;
-#include "common/work_queue.wgsl"
-
-// One workgroup per driver thread (common/work_queue.wgsl): each subgroup lists chunks of QUEUE_CHUNK
-// surfels (in depth order) until none is left.
-@compute @workgroup_size(256)
-fn main(@builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_size) sg_size: u32) {
-    loop {
-        let first = take_work(QUEUE_CHUNK, sg_lane);
-        if first >= params.num_surfels {
-            break;
-        }
-        for (var j = 0u; j < QUEUE_CHUNK; j += sg_size) {
-            emit(first + j + sg_lane);
-        }
-    }
-}
-#else
-@compute @workgroup_size(256)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    emit(gid.x);
-}
 #endif
+#include "common/surfel_pass_main.wgsl"
 
 // Lists the intersections of the surfel at depth-order place i (none past the end; every lane of the
 // subgroup calls it, for the subgroup reduction).
-fn emit(i: u32) {
+fn surfel_work(i: u32) {
     let valid = i < params.num_surfels;
     let j = min(i, params.num_surfels - 1u);   // lanes past the end read the last surfel and store nothing
     let sid = sorted_ids[j];

@@ -155,31 +155,11 @@ fn quat_backward(q_in: vec4<f32>, v_r: mat3x3<f32>) -> vec4<f32> {
 
 #if WORK_QUEUE
 @group(0) @binding(14) var<storage, read_write> work_queue: array<atomic<u32>>;
-#include "common/work_queue.wgsl"
-
-// One workgroup per driver thread (common/work_queue.wgsl): each subgroup takes chunks of QUEUE_CHUNK
-// surfels until none is left.
-@compute @workgroup_size(256)
-fn main(@builtin(subgroup_invocation_id) sg_lane: u32, @builtin(subgroup_size) sg_size: u32) {
-    loop {
-        let first = take_work(QUEUE_CHUNK, sg_lane);
-        if first >= params.num_surfels {
-            break;
-        }
-        for (var j = 0u; j < QUEUE_CHUNK; j += sg_size) {
-            surfel_backward(first + j + sg_lane);
-        }
-    }
-}
-#else
-@compute @workgroup_size(256)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    surfel_backward(gid.x);
-}
 #endif
+#include "common/surfel_pass_main.wgsl"
 
 // The gradients of surfel i (none past the end).
-fn surfel_backward(i: u32) {
+fn surfel_work(i: u32) {
     if i >= params.num_surfels {
         return;
     }

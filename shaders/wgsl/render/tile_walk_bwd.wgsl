@@ -156,22 +156,9 @@ fn store_record(rec: u32, s: ProjectedSurfel, t: HitTotals, sg_lane: u32) {
 #endif
 }
 
-@compute @workgroup_size(8)   // one subgroup (SG = 8) per tile
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
-#if WORK_QUEUE
-    let tiles = params.tile_grid.x * params.tile_grid.y;
-    loop {
-        let tile = take_work(1u, sg_lane);
-        if tile >= tiles {
-            break;
-        }
-        walk(tile, sg_lane);
-    }
-#else
-    walk(wg.y * params.tile_grid.x + wg.x, sg_lane);
-#endif
-}
+#include "render/tile_walk_main.wgsl"
 
+// Replay one tile with one subgroup.
 fn walk(tile: u32, sg_lane: u32) {
     let origin = vec2<u32>(tile % params.tile_grid.x, tile / params.tile_grid.x) * TILE_SIZE;
     var r0 = start_block_replay(origin, 0u, sg_lane);

@@ -109,22 +109,9 @@ fn write_block(origin: vec2<u32>, g: u32, sg_lane: u32, r: BlockBlend) {
     write_pixel(pix + 3u * ROW_STEP, r.d.result);
 }
 
-@compute @workgroup_size(8)   // one subgroup (SG = 8) per tile
-fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(subgroup_invocation_id) sg_lane: u32) {
-#if WORK_QUEUE
-    let tiles = params.tile_grid.x * params.tile_grid.y;
-    loop {
-        let tile = take_work(1u, sg_lane);
-        if tile >= tiles {
-            break;
-        }
-        walk(tile, sg_lane);
-    }
-#else
-    walk(wg.y * params.tile_grid.x + wg.x, sg_lane);
-#endif
-}
+#include "render/tile_walk_main.wgsl"
 
+// Composite one tile with one subgroup.
 fn walk(tile: u32, sg_lane: u32) {
     let origin = vec2<u32>(tile % params.tile_grid.x, tile / params.tile_grid.x) * TILE_SIZE;
     // Eight named states rather than an array: an indexed private array would live in per-lane scratch.
