@@ -25,7 +25,9 @@ import weakref
 import numpy as np
 
 PAGE = mmap.PAGESIZE
-KEEP_BYTES = 256 << 20   # free regions kept for reuse at most (beyond that they are unmapped)
+# Free regions kept for reuse at most (beyond that they are unmapped): a 512 x 512 training step reads back
+# ~14 MB; much larger reads (a 4K frame's images) are simply not kept.
+KEEP_BYTES = 128 << 20
 
 
 class HostMemoryPool:
