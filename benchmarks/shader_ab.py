@@ -52,7 +52,9 @@ def main() -> int:
     if not 1 <= args.count <= MAX_SURFELS:
         print(f"--count {args.count}: must lie in 1..{MAX_SURFELS} (the renderer's surfel limit)", file=sys.stderr)
         return 2
-    if (args.toggle is None) == (args.a is None or args.b is None) or (args.a is None) != (args.b is None):
+    two_dirs = args.a is not None and args.b is not None
+    no_dirs = args.a is None and args.b is None
+    if not ((args.toggle is None and two_dirs) or (args.toggle is not None and no_dirs)):
         print("give two shader directories, or --toggle ATTR without them", file=sys.stderr)
         return 2
     dirs = [shader_root()] * 2 if args.toggle else [Path(args.a), Path(args.b)]

@@ -123,3 +123,22 @@ def test_machine_line_names_the_processor_and_torchs_vector_width():
     before, after, capability = out.stdout.strip().splitlines()
     assert f"{os.cpu_count()} cores" in before and "torch" not in before
     assert after.startswith(before.split(", load")[0]) and f", torch {capability}, load " in after
+
+
+@pytest.mark.gpu
+def test_shader_ab_toggles_a_rasterizer_switch():
+    """``shader_ab.py --toggle SWITCH`` times this checkout's shaders with a SurfelRasterizer switch off and
+    on; directories beside it, or a name that is not a switch, get one line and exit 2."""
+    def run(*args):
+        return subprocess.run([sys.executable, str(BENCH / "shader_ab.py"), *args, "--rounds", "2", "--count",
+                               "500"], cwd=REPO, capture_output=True, text=True, timeout=600,
+                              env=dict(os.environ, PYTHONPATH=str(REPO)))
+    out = run("--toggle", "use_work_queues")
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "rasterize_bwd" in out.stdout and "B/A" in out.stdout
+    for args, message in ((("--toggle", "no_such_switch"), "not a switch of SurfelRasterizer"),
+                          (("--toggle", "use_work_queues", "shaders/wgsl", "shaders/wgsl"), "give two shader"),
+                          (("shaders/wgsl",), "give two shader")):
+        bad = run(*args)
+        assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr
+        assert message in bad.stderr.strip().splitlines()[-1]

@@ -98,18 +98,16 @@ class ShaderLibrary:
 
     def source(self, rel: str, defines: dict | None = None) -> str:
         """Full source of ``rel``: defines first, then the file with every include inlined once."""
-        return self._expand(rel, defines)
+        return self._expand(rel, self._read(rel), defines)
 
     def source_text(self, text: str, defines: dict | None = None) -> str:
         """Like :meth:`source` for WGSL held in a string (a benchmark's probe kernel), whose includes are
         this library's files."""
-        self._text["<text>"] = text
-        try:
-            return self._expand("<text>", defines)
-        finally:
-            del self._text["<text>"]
+        return self._expand("<text>", text, defines)
 
-    def _expand(self, rel: str, defines: dict | None) -> str:
+    def _expand(self, rel: str, text: str, defines: dict | None) -> str:
+        """``text`` (the source of ``rel``) with its includes inlined once, conditionals selected and the
+        defines prepended."""
         seen: set[str] = set()
 
         def expand(name: str, stack: tuple[str, ...]) -> list[str]:
@@ -119,7 +117,7 @@ class ShaderLibrary:
                 return []
             seen.add(name)
             out = [f"// ---- {name}"]
-            for line in self._read(name).splitlines():
+            for line in (text if name == rel else self._read(name)).splitlines():
                 m = _INCLUDE.match(line)
                 out.extend(expand(m.group(1), stack + (name,)) if m else [line])
             return out
