@@ -9,6 +9,7 @@ import torch
 
 from gma.core.camera import Camera
 from gma.gpu import GpuContext, get_context
+from gma.gpu.openmp_workers import openmp_workers_asleep
 from gma.render.rasterizer import SurfelRasterizer, read_outputs
 from gma.render.surfels import SurfelBuffers
 from gma.render.validate import check_background, check_camera, check_surfel_values, check_surfels, host_array
@@ -45,6 +46,12 @@ class _RasterizeFunction(torch.autograd.Function):
     def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host,
                 replay):
         fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
+        # On a CPU adapter torch's idle OpenMP workers would spin on the cores the render runs on.
+        with openmp_workers_asleep(active=gpu.is_software):
+            return _RasterizeFunction._forward(fctx, means, viewmat, K, background, width, height, gpu, host, replay)
+
+    @staticmethod
+    def _forward(fctx, means, viewmat, K, background, width, height, gpu, host, replay):
         # host: float32 copies of the five surfel tensors; the buffers are recycled once the autograd graph
         # lets go of this call (gma/gpu/recycle.py), as are the forward state's.
         surfels = SurfelBuffers.from_arrays(gpu, *host, recycled=True)
@@ -67,6 +74,11 @@ class _RasterizeFunction(torch.autograd.Function):
         needs = fctx.needs_input_grad
         if not any(needs[:5]) and not needs[7]:
             return (None,) * 13
+        with openmp_workers_asleep(active=fctx.rast.ctx.is_software):
+            return _RasterizeFunction._backward(fctx, needs, v_color, v_alpha, v_normal, v_depth)
+
+    @staticmethod
+    def _backward(fctx, needs, v_color, v_alpha, v_normal, v_depth):
         upstream = [None if g is None else host_array(g) for g in (v_color, v_alpha, v_normal, v_depth)]
         dev = fctx.device
         result = [None] * 5

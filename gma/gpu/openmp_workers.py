@@ -1,0 +1,116 @@
+"""Torch's idle OpenMP workers asleep while a CPU adapter renders.
+
+Torch runs its CPU ops on an OpenMP thread pool (libgomp on Linux). After each parallel op, libgomp's
+worker threads spin-wait for the next one before they sleep: by default 300,000 pause instructions,
+about 8 ms of a core on this project's 2-core VMs. In a loop around ``gma.render.rasterize`` every
+user op before the render (the parameters' ``clone()``) and before its backward (the loss) starts such
+a spin, on a core that lavapipe's threads need: the spinning worker took 16 ms of CPU per public
+forward+backward step of the standard scene, all of it out of lavapipe's share (projection 8.9
+instead of 4.9 ms, the backward rasterize 33.1 instead of 28.3). ``OMP_WAIT_POLICY=passive`` stops
+the spin, but only when set before torch is imported, for the whole process, and torch's own chains of
+ops lose by it.
+
+:func:`openmp_workers_asleep` stops it only while GMA waits for the adapter: it opens a parallel
+region of torch's pool (``GOMP_parallel_start``, libgomp's ABI for compiler-made code) whose workers
+block in ``sem_wait``, asleep in the kernel, while the calling thread goes on as the region's master;
+on leaving, it posts the semaphore once per worker and closes the region (``GOMP_parallel_end``). The
+workers then return to the pool exactly as after any torch op (and spin, now beside the caller's own
+work). In between, torch ops on the calling thread run on one thread (torch sees a parallel region), so
+the region covers only GMA's own code, which keeps its host work in numpy.
+
+It does nothing unless all of these hold: Linux, torch's parallel backend is OpenMP with libgomp
+already loaded, torch uses more than one thread, the caller is the main thread (each thread that runs
+torch ops has a pool of its own; another thread's region would make a new pool rather than quiet the
+one that spins), no region is open on it, and ``GMA_OPENMP_WORKERS`` is not ``spin``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import torch
+
+_UNSET = object()
+_gomp = _UNSET   # the loaded libgomp (a ctypes library) or None where parking does not apply
+_libc = None
+
+
+def _torch_libgomp() -> ctypes.CDLL | None:
+    """The libgomp that torch's ops run on, opened only if it is already loaded; None where there is none."""
+    if not sys.platform.startswith("linux") or "OpenMP" not in torch.__config__.parallel_info():
+        return None
+    try:
+        with open("/proc/self/maps") as maps:
+            fields = [line.split(None, 5) for line in maps if "libgomp" in line]
+    except OSError:
+        return None
+    paths = {f[5].strip() for f in fields if len(f) == 6}
+    paths = {p for p in paths if Path(p).name.startswith("libgomp")}
+    torch_lib = str(Path(torch.__file__).resolve().parent / "lib")
+    own = [p for p in paths if p.startswith(torch_lib)]
+    candidates = own or sorted(paths)
+    if len(candidates) != 1:   # none, or several and none of them torch's: not ours to guess
+        return None
+    try:
+        lib = ctypes.CDLL(candidates[0], mode=os.RTLD_NOLOAD | os.RTLD_LAZY)
+        lib.GOMP_parallel_start.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint]
+        lib.GOMP_parallel_start.restype = None
+        lib.GOMP_parallel_end.restype = None
+        lib.omp_in_parallel.restype = ctypes.c_int
+        lib.omp_get_num_threads.restype = ctypes.c_int
+    except (OSError, AttributeError):
+        return None
+    return lib
+
+
+def _library() -> ctypes.CDLL | None:
+    global _gomp, _libc
+    if _gomp is _UNSET:
+        gomp = _torch_libgomp()
+        if gomp is not None:
+            _libc = ctypes.CDLL(None, use_errno=True)
+            for name in ("sem_init", "sem_post", "sem_destroy"):
+                getattr(_libc, name).restype = ctypes.c_int
+        _gomp = gomp
+    return _gomp
+
+
+def _applies() -> bool:
+    if os.environ.get("GMA_OPENMP_WORKERS", "") == "spin":
+        return False
+    if threading.current_thread() is not threading.main_thread() or torch.get_num_threads() < 2:
+        return False
+    gomp = _library()
+    return gomp is not None and gomp.omp_in_parallel() == 0
+
+
+@contextlib.contextmanager
+def openmp_workers_asleep(active: bool = True) -> Iterator[bool]:
+    """While the block runs, torch's idle OpenMP workers of the calling thread sleep instead of spinning
+    (see the module's text); yields whether they do. ``active=False`` (e.g. a real GPU, whose work does not
+    share the CPU) makes it a no-op."""
+    if not (active and _applies()):
+        yield False
+        return
+    gomp, libc = _gomp, _libc
+    sem = (ctypes.c_long * 8)()   # a sem_t (32 bytes on x86-64 and aarch64), long-aligned
+    if libc.sem_init(sem, 0, 0) != 0:
+        yield False
+        return
+    sem_wait = ctypes.cast(libc.sem_wait, ctypes.c_void_p).value
+    gomp.GOMP_parallel_start(sem_wait, ctypes.addressof(sem), torch.get_num_threads())
+    try:
+        yield True
+    finally:
+        # The master (this thread) does not run sem_wait; each worker takes one post. A worker whose
+        # wait a signal interrupted has gone on to the region's end and leaves its post unused.
+        for _ in range(gomp.omp_get_num_threads() - 1):
+            libc.sem_post(sem)
+        gomp.GOMP_parallel_end()
+        libc.sem_destroy(sem)
