@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 import torch
+from render_helpers import default_camera, torch_scene
 
 from gma.gpu import openmp_workers
 from gma.gpu.openmp_workers import openmp_workers_asleep
 from gma.render import rasterize
-from render_helpers import default_camera, torch_scene
 
 pytestmark = pytest.mark.skipif(
     torch.get_num_threads() < 2 or openmp_workers._library() is None,
