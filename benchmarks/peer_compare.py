@@ -14,8 +14,9 @@ back-to-back frames took 60 ms; the peer's 1.5 s steps hardly notice.) Prints me
 worker process, interleaved the same way, so that a speed-up over our own earlier code is a ratio from
 one run too; ``--baseline . --baseline-env GMA_LAVAPIPE=system`` times this same code on the system's
 lavapipe instead of the newer one kept in GMA's cache (the worker's adapter is printed), and
-``--baseline . --baseline-env OMP_WAIT_POLICY=passive`` with torch's OpenMP workers not spinning beside
-lavapipe's threads (README, "Environment"); the baseline's ratio to the peer is printed too.
+``--baseline . --baseline-env GMA_OPENMP_WORKERS=spin`` with torch's idle OpenMP workers spinning beside
+lavapipe's threads while GMA renders, as before 2026-12-03 (README, "Environment"); the baseline's ratio
+to the peer is printed too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--burst 3] [--baseline DIR]
