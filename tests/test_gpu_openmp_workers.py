@@ -19,7 +19,7 @@ pytestmark = pytest.mark.skipif(openmp_workers._library() is None, reason="needs
 
 @pytest.fixture(autouse=True)
 def two_torch_threads():
-    """Torch on two threads (as on CI's 2-core machines; other tests and GMA's commands may have set one)."""
+    """Torch on two threads (as on CI's 2-core machines; in-process fits, eval and the viewer set fewer)."""
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     yield
