@@ -93,8 +93,9 @@ class FitConfig:
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
     cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (2x faster on CPU)")
-    threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is fastest on a small CPU: torch and the "
-                            "lavapipe rasteriser compete for cores (measured 3-6x slower torch with 2 on 2 cores)")
+    threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is the safe choice on a small or shared CPU: "
+                            "on an idle 2-core machine 0 (two threads) trained 1.6x faster, but with one other busy "
+                            "process beside it 1.45x slower, as torch's threads wait for each other's cores")
     decoders: str = doc("", "frozen shared decoders (a decoders.gma from a several-sequence fit, or any .gma "
                             "avatar): fit only the features")
     checkpoint_every: int = doc(50, "steps between atomic checkpoints (also at each stage's end)")
