@@ -13,7 +13,8 @@ ops lose by it.
 :func:`openmp_workers_asleep` stops it only while GMA waits for the adapter: it opens a parallel
 region of torch's pool (``GOMP_parallel_start``, libgomp's ABI for compiler-made code) whose workers
 block in ``sem_wait``, asleep in the kernel, while the calling thread goes on as the region's master;
-on leaving, it posts the semaphore once per worker and closes the region (``GOMP_parallel_end``). The
+on leaving, it posts the semaphore once per worker, waits (asleep) until they have taken the posts, and
+closes the region (``GOMP_parallel_end``). The
 workers then return to the pool exactly as after any torch op (and spin, now beside the caller's own
 work). In between, torch ops on the calling thread run on one thread (torch sees a parallel region), so
 the region covers only GMA's own code, which keeps its host work in numpy.
@@ -31,6 +32,7 @@ import ctypes
 import os
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -75,7 +77,7 @@ def _library() -> ctypes.CDLL | None:
         gomp = _torch_libgomp()
         if gomp is not None:
             _libc = ctypes.CDLL(None, use_errno=True)
-            for name in ("sem_init", "sem_post", "sem_destroy"):
+            for name in ("sem_init", "sem_post", "sem_getvalue", "sem_destroy"):
                 getattr(_libc, name).restype = ctypes.c_int
         _gomp = gomp
     return _gomp
@@ -112,5 +114,19 @@ def openmp_workers_asleep(active: bool = True) -> Iterator[bool]:
         # wait a signal interrupted has gone on to the region's end and leaves its post unused.
         for _ in range(gomp.omp_get_num_threads() - 1):
             libc.sem_post(sem)
+        _until_taken(libc, sem)
         gomp.GOMP_parallel_end()
         libc.sem_destroy(sem)
+
+
+def _until_taken(libc, sem) -> None:
+    """Return once the workers have taken every post of ``sem`` (or after 1,000 short sleeps): 100 us of
+    polling (a woken worker runs within tens of microseconds on an idle machine), then short sleeps.
+    GOMP_parallel_end's barrier spins instead, and on a loaded machine that spin held the core that a woken
+    worker waited for."""
+    value = ctypes.c_int()
+    for i in range(1200):
+        if libc.sem_getvalue(sem, ctypes.byref(value)) != 0 or value.value <= 0:
+            return
+        if i >= 200:
+            time.sleep(50e-6)
