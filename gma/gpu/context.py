@@ -17,6 +17,7 @@ from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
 from gma.gpu.bind_groups import BindGroupCache
 from gma.gpu.host_memory import HostMemoryPool
+from gma.gpu.mapped_reads import MappedReads
 from gma.gpu.recycle import BufferRecycler
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
@@ -25,6 +26,9 @@ __all__ = ["GpuContext", "NoAdapterError", "get_context"]
 
 # Optional features we use when the adapter has them; every use has a fallback path.
 OPTIONAL_FEATURES = ("shader-float32-atomic", "subgroup", "timestamp-query")
+# Storage buffers that can also be mapped (wgpu native): on CPU adapters only, whose buffers are all host
+# memory, so that read-backs map outputs in place (gma/gpu/mapped_reads.py).
+IN_PLACE_READS = "mappable-primary-buffers"
 
 # Limits we raise to what the adapter offers (WebGPU defaults are far lower than real hardware).
 class GpuMemoryError(DeviceError, MemoryError):
@@ -68,11 +72,15 @@ class GpuContext:
     bind_groups: BindGroupCache = field(default_factory=BindGroupCache, repr=False)
     _constants: OrderedDict = field(default_factory=OrderedDict, repr=False)
     _constants_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    _mapped_reads: MappedReads | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
         adapter = select_adapter(preference)
         wanted = [f for f in OPTIONAL_FEATURES if f in adapter.features and f not in disable_features]
+        if (adapter.info.get("adapter_type") == "CPU" and IN_PLACE_READS in adapter.features
+                and IN_PLACE_READS not in disable_features and os.environ.get("GMA_IN_PLACE_READS", "1") != "0"):
+            wanted.append(IN_PLACE_READS)
         limits = {k: adapter.limits[k] for k in RAISED_LIMITS if k in adapter.limits}
         device = adapter.request_device_sync(
             label="gma", required_features=wanted, required_limits=limits
@@ -87,6 +95,25 @@ class GpuContext:
     @property
     def is_software(self) -> bool:
         return self.adapter.info.get("adapter_type") == "CPU"
+
+    @property
+    def reads_in_place(self) -> bool:
+        """Whether outputs can be written into mappable buffers and read without copies (mapped_reads.py)."""
+        return IN_PLACE_READS in self.features
+
+    @property
+    def mapped_reads(self) -> MappedReads:
+        if self._mapped_reads is None:
+            self._mapped_reads = MappedReads(self.device)
+        return self._mapped_reads
+
+    def read_in_place(self, buffer: wgpu.GPUBuffer, nbytes: int) -> np.ndarray:
+        """The first ``nbytes`` of a buffer from :attr:`mapped_reads`, once the GPU has written it, as a
+        uint8 array over its mapping (no copy; see mapped_reads.py)."""
+        if self.transfers.wait_for_compute:   # as read_many: the timing counts the read, not the compute
+            self.wait_idle()
+        with self.transfers.download(nbytes):
+            return self.mapped_reads.read(buffer, nbytes)
 
     @property
     def is_lavapipe(self) -> bool:

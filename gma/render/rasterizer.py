@@ -20,6 +20,7 @@ import wgpu
 from gma.core.camera import Camera
 from gma.gpu import GpuContext, PassTimer
 from gma.gpu.context import STORAGE
+from gma.gpu.mapped_reads import packed_ranges
 from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
@@ -429,18 +430,27 @@ class SurfelRasterizer:
             return ctx.recycler.take(nbytes, label, STORAGE) if replay else self.workspace.get(label, nbytes)
 
         # The rasterizer writes every pixel of these (recycled buffers hold an earlier render's values).
-        images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
-                  image("out.depth", 4 * hw)]
+        # Read in place (CPU adapters): ranges of one mappable buffer, after the projection's counts, whose
+        # mapping the returned arrays are (gma/gpu/mapped_reads.py).
+        in_place = read_images and ctx.reads_in_place
+        if in_place:
+            packed, images, image_ranges, packed_bytes = self._packed_images(hw, c)
+        else:
+            images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
+                      image("out.depth", 4 * hw)]
         replayed = [image("out.final_t", 4 * hw), image("out.last", 4 * hw)] if replay else []
         background_buf = ctx.constant(bg, "background")  # never written: states of earlier renders share it
         lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
                                          images + replayed, timer)
-        image_reads = _image_reads(images, camera, c) if read_images else []
-        if n:
+        image_reads = _image_reads(images, camera, c) if read_images and not in_place else []
+        if in_place:
+            stats, host = self._read_packed(st, n, packed, image_ranges, packed_bytes)
+        elif n:
             stats, *host = ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
         else:
             stats, host = np.zeros(4, np.uint32), ctx.read_many(image_reads)
         num_isects, needed_bits = int(stats[1]), depth_key_bits(stats)
+        del stats   # (with in-place reads a view of the images' mapping)
         # Exact from here on: the backward's passes bound the intersection lists by it.
         ctx.write(st.params, np.array([num_isects], np.uint32), offset=CAPACITY_OFFSET)
         if num_isects > capacity or needed_bits > key_bits:
@@ -448,9 +458,15 @@ class SurfelRasterizer:
                 timer.names = timed_projection
             if lists[3] is not None:   # the texels' lease of the render that is done again
                 self.texels.give_back(lists[3])
+            if in_place:   # the first images' buffer stays mapped until their arrays are gone
+                del host
+                packed, images, image_ranges, packed_bytes = self._packed_images(hw, c)
             lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
                                              images + replayed, timer)
-            host = ctx.read_many(image_reads)
+            if in_place:
+                host = self._read_packed(st, 0, packed, image_ranges, packed_bytes)[1]
+            else:
+                host = ctx.read_many(image_reads)
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
@@ -467,11 +483,32 @@ class SurfelRasterizer:
             # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
             # writes every surfel's tile count, and the rest is read only where tile counts, lists and
             # ranges point, which this render wrote.
-            kept = [*st.kept, isect_ids, ranges, *images, *replayed]
+            kept = [*st.kept, isect_ids, ranges, *([] if in_place else images), *replayed]
             if records:
                 kept += [records.isect_keys, records.record_base, records.used_blocks]
             ctx.recycler.release_with(state, kept)
         return state
+
+    def _packed_images(self, hw: int, c: int):
+        """A mappable buffer for a render's counts (16 bytes) and images, the images' (buffer, offset,
+        size) bindings, their ranges and the bytes to read."""
+        ranges, total = packed_ranges([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], self._offset_alignment())
+        packed = self.ctx.mapped_reads.take(total, "out.images")
+        return packed, [(packed, off, size) for off, size in ranges[1:]], ranges, total
+
+    def _read_packed(self, st: ProjectionState, n: int, packed, ranges, total):
+        """Copy projection's counts beside the images (when there are surfels) and read both in place:
+        (counts, [color, alpha, normal, depth]) as flat arrays over the mapping."""
+        if n:
+            enc = self.ctx.device.create_command_encoder()
+            enc.copy_buffer_to_buffer(st.stats, 0, packed, 0, 16)
+            self.ctx.submit(enc)
+        raw = self.ctx.read_in_place(packed, total)
+        stats = raw[:16].view(np.uint32) if n else np.zeros(4, np.uint32)
+        return stats, [raw[off:off + size].view(np.float32) for off, size in ranges[1:]]
+
+    def _offset_alignment(self) -> int:
+        return int(self.ctx.device.limits.get("min-storage-buffer-offset-alignment", 256))
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
@@ -545,7 +582,15 @@ class SurfelRasterizer:
         # them into a zero-filled v_colors.
         color_in_proj = defines["USE_SUBGROUPS"] and not normal_depth
         colors_out = color_in_proj or records is not None
-        if colors_out:
+        # project_bwd writes every gradient: with in-place reads into ranges of one mappable buffer, whose
+        # mapping the returned arrays are (gma/gpu/mapped_reads.py).
+        grad_sizes = [4 * k * n for k in (3, 4, 2, 1, c)]
+        in_place = colors_out and ctx.reads_in_place
+        if in_place:
+            grad_ranges, grad_bytes = packed_ranges(grad_sizes, self._offset_alignment())
+            packed = ctx.mapped_reads.take(grad_bytes, "v_surfels")
+            *outs, v_colors = [(packed, off, size) for off, size in grad_ranges]
+        elif colors_out:
             v_colors = take(4 * c * n, "v_colors", STORAGE)
             recycled.append(v_colors)
         else:
@@ -578,9 +623,10 @@ class SurfelRasterizer:
             resources.pop(COLORS_BINDING, None)
         groups = self._groups(enc, resources, defines["WORK_QUEUE"], 24, (tx, ty, 1))
         self._dispatch(enc, raster, resources, groups, "rasterize_bwd", timer)
-        outs = [take(4 * k * n, name, STORAGE) for name, k in (("v_means", 3), ("v_quats", 4), ("v_scales", 2),
-                                                              ("v_opacities", 1))]
-        recycled += outs
+        if not in_place:
+            outs = [take(size, name, STORAGE) for name, size in zip(("v_means", "v_quats", "v_scales", "v_opacities"),
+                                                                     grad_sizes)]
+            recycled += outs
         proj_resources = dict(enumerate([state.proj.params, surfels.means, surfels.quats, surfels.scales,
                                          state.proj.tile_counts, grads, *outs]))
         if colors_out:
@@ -601,9 +647,14 @@ class SurfelRasterizer:
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
-        means, quats, scales, opacities, colors = ctx.read_many(
-            [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
-             (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
+        if in_place:
+            raw = ctx.read_in_place(packed, grad_bytes)
+            means, quats, scales, opacities, colors = (raw[off:off + size].view(np.float32)
+                                                       for off, size in grad_ranges)
+        else:
+            means, quats, scales, opacities, colors = ctx.read_many(
+                [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
+                 (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
         ctx.recycler.give_back(recycled)  # read back: nothing else holds them
         return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
                            colors.reshape(n, c))
