@@ -40,14 +40,14 @@ class MappedReads:
         self._lock = threading.Lock()
         self.reused = 0   # tests read it
 
-    def take(self, nbytes: int, label: str) -> wgpu.GPUBuffer:
+    def take(self, nbytes: int, label: str, reuse: bool = True) -> wgpu.GPUBuffer:
         """An unmapped buffer of at least ``nbytes`` for passes to write and :meth:`read` to return (its
-        contents undefined)."""
+        contents undefined); ``reuse=False`` makes a fresh one (as the recycler's switch, GMA_RECYCLE=0)."""
         size = max(GRANULE, -(-int(nbytes) // GRANULE) * GRANULE)
         with self._lock:
             self._file_returned()
-            for i, buf in enumerate(self._free):
-                if buf.size == size:
+            for i in range(len(self._free) - 1, -1, -1) if reuse else ():   # the most recently returned first
+                if self._free[i].size == size:
                     self.reused += 1
                     return self._free.pop(i)
         return self.device.create_buffer(label=label, size=size, usage=USAGE)
@@ -66,14 +66,14 @@ class MappedReads:
         return np.frombuffer(lease, np.uint8)[:nbytes]
 
     def _file_returned(self) -> None:
-        """Unmap the buffers handed back since the last call and keep up to ``keep`` (lock held)."""
+        """Unmap the buffers handed back since the last call; keep the ``keep`` most recently returned
+        (lock held)."""
         while self._returned:
-            buf = self._returned.pop()
+            buf = self._returned.pop(0)
             buf.unmap()
-            if len(self._free) < self.keep:
-                self._free.append(buf)
-            else:
-                buf.destroy()
+            self._free.append(buf)
+        while len(self._free) > self.keep:
+            self._free.pop(0).destroy()
 
     @property
     def mapped(self) -> int:

@@ -493,7 +493,7 @@ class SurfelRasterizer:
         """A mappable buffer for a render's counts (16 bytes) and images, the images' (buffer, offset,
         size) bindings, their ranges and the bytes to read."""
         ranges, total = packed_ranges([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], self._offset_alignment())
-        packed = self.ctx.mapped_reads.take(total, "out.images")
+        packed = self.ctx.mapped_reads.take(total, "out.images", reuse=self.ctx.recycler.enabled)
         return packed, [(packed, off, size) for off, size in ranges[1:]], ranges, total
 
     def _read_packed(self, st: ProjectionState, n: int, packed, ranges, total):
@@ -588,7 +588,7 @@ class SurfelRasterizer:
         in_place = colors_out and ctx.reads_in_place
         if in_place:
             grad_ranges, grad_bytes = packed_ranges(grad_sizes, self._offset_alignment())
-            packed = ctx.mapped_reads.take(grad_bytes, "v_surfels")
+            packed = ctx.mapped_reads.take(grad_bytes, "v_surfels", reuse=ctx.recycler.enabled)
             *outs, v_colors = [(packed, off, size) for off, size in grad_ranges]
         elif colors_out:
             v_colors = take(4 * c * n, "v_colors", STORAGE)
