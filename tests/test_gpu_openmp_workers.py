@@ -1,7 +1,6 @@
 """Torch's idle OpenMP workers asleep while GMA renders on a CPU adapter (gma/gpu/openmp_workers.py):
 they stop spinning, torch works as before afterwards, and the render is the same."""
 
-import os
 import threading
 import time
 from pathlib import Path
@@ -52,8 +51,8 @@ def _others_cpu_after_a_parallel_op(asleep: bool) -> float:
     return used
 
 
-def test_the_workers_sleep_instead_of_spinning():
-    os.environ.pop("GMA_OPENMP_WORKERS", None)
+def test_the_workers_sleep_instead_of_spinning(monkeypatch):
+    monkeypatch.delenv("GMA_OPENMP_WORKERS", raising=False)
     spinning = min(_others_cpu_after_a_parallel_op(False) for _ in range(3))
     asleep = max(_others_cpu_after_a_parallel_op(True) for _ in range(3))
     # Asleep, the workers take nothing measurable (wake-up and exit: microseconds); allow 1.5 ms for

@@ -39,7 +39,9 @@ def test_render_on_recycled_buffers_equals_fresh_buffers(gpu, monkeypatch):
     _render_and_grads(gpu, other, cam, {k: -2 * v for k, v in upstream.items()})
     gc.collect()
     # On CPU adapters the images and gradients go to mappable buffers of their own (gma/gpu/mapped_reads.py).
-    reused = lambda: recycler.reused + (gpu.mapped_reads.reused if gpu.reads_in_place else 0)  # noqa: E731
+    def reused() -> int:
+        return recycler.reused + (gpu.mapped_reads.reused if gpu.reads_in_place else 0)
+
     before = reused()
     images, grads = _render_and_grads(gpu, scene, cam, upstream)
     assert reused() - before >= 20, "the second call should run on the first call's buffers"

@@ -17,7 +17,7 @@ from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
 from gma.gpu.bind_groups import BindGroupCache
 from gma.gpu.host_memory import HostMemoryPool
-from gma.gpu.mapped_reads import MappedReads
+from gma.gpu.mapped_reads import MappedReads, PackedBuffer
 from gma.gpu.recycle import BufferRecycler
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
@@ -107,13 +107,13 @@ class GpuContext:
             self._mapped_reads = MappedReads(self.device)
         return self._mapped_reads
 
-    def read_in_place(self, buffer: wgpu.GPUBuffer, nbytes: int) -> np.ndarray:
-        """The first ``nbytes`` of a buffer from :attr:`mapped_reads`, once the GPU has written it, as a
-        uint8 array over its mapping (no copy; see mapped_reads.py)."""
+    def read_in_place(self, packed: PackedBuffer) -> list[np.ndarray]:
+        """The ranges of a buffer from :meth:`MappedReads.take_packed`, once the GPU has written them, as
+        uint8 arrays over its mapping (no copy; see mapped_reads.py)."""
         if self.transfers.wait_for_compute:   # as read_many: the timing counts the read, not the compute
             self.wait_idle()
-        with self.transfers.download(nbytes):
-            return self.mapped_reads.read(buffer, nbytes)
+        with self.transfers.download(packed.nbytes):
+            return self.mapped_reads.read_packed(packed)
 
     @property
     def is_lavapipe(self) -> bool:

@@ -53,11 +53,10 @@ class HostMemoryPool:
                 self.reused += 1
         if region is None:
             region = mmap.mmap(-1, size)
-        lease = (ctypes.c_uint8 * max(nbytes, 1)).from_buffer(region)
         # The ctypes array holds an export of the region's buffer while it lives; the finalizer gets the
         # region itself (not the lease, which is gone by then).
-        weakref.finalize(lease, self._returned.append, region).atexit = False
-        return np.frombuffer(lease, np.uint8)[:nbytes]
+        return leased_array((ctypes.c_uint8 * max(nbytes, 1)).from_buffer(region), nbytes, self._returned.append,
+                            region)
 
     def _file_returned(self) -> None:
         """Move regions given back since the last call into the free lists (called with the lock held)."""
@@ -74,3 +73,11 @@ class HostMemoryPool:
         with self._lock:
             self._file_returned()
             return self._free_bytes
+
+
+def leased_array(lease: ctypes.Array, nbytes: int, give_back, item) -> np.ndarray:
+    """The first ``nbytes`` of the ctypes array ``lease`` as a uint8 numpy array; once it and every view
+    of it (torch tensors from it included) are gone, ``give_back(item)`` runs, possibly inside garbage
+    collection on any thread, so it must only file ``item`` (list.append)."""
+    weakref.finalize(lease, give_back, item).atexit = False
+    return np.frombuffer(lease, np.uint8)[:nbytes]

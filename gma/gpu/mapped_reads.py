@@ -21,10 +21,12 @@ from __future__ import annotations
 
 import ctypes
 import threading
-import weakref
+from dataclasses import dataclass
 
 import numpy as np
 import wgpu
+
+from gma.gpu.host_memory import leased_array
 
 USAGE = wgpu.BufferUsage.STORAGE | wgpu.BufferUsage.MAP_READ | wgpu.BufferUsage.COPY_DST
 GRANULE = 64 << 10   # buffer sizes are rounded up to this, so that nearby sizes share buffers
@@ -60,10 +62,20 @@ class MappedReads:
         view = np.frombuffer(buffer.read_mapped(0, buffer.size, copy=False), np.uint8)
         address = view.ctypes.data
         del view   # wgpu releases its memoryview at unmap; the lease below does not depend on it
-        lease = (ctypes.c_uint8 * max(nbytes, 1)).from_address(address)
-        done = weakref.finalize(lease, self._returned.append, buffer)
-        done.atexit = False
-        return np.frombuffer(lease, np.uint8)[:nbytes]
+        return leased_array((ctypes.c_uint8 * max(nbytes, 1)).from_address(address), nbytes, self._returned.append,
+                            buffer)
+
+    def take_packed(self, sizes: list[int], label: str, reuse: bool = True) -> PackedBuffer:
+        """One buffer (:meth:`take`) holding ranges of ``sizes`` bytes at the device's storage-binding
+        offset alignment, for passes to write through :attr:`PackedBuffer.bindings`."""
+        alignment = int(self.device.limits.get("min-storage-buffer-offset-alignment", 256))
+        ranges, total = packed_ranges(sizes, alignment)
+        return PackedBuffer(self.take(total, label, reuse), ranges, total)
+
+    def read_packed(self, packed: PackedBuffer) -> list[np.ndarray]:
+        """:meth:`read` of a packed buffer: one uint8 array per range, over one mapping."""
+        raw = self.read(packed.buffer, packed.nbytes)
+        return [raw[off:off + size] for off, size in packed.ranges]
 
     def _file_returned(self) -> None:
         """Unmap the buffers handed back since the last call; keep the ``keep`` most recently returned
@@ -75,10 +87,19 @@ class MappedReads:
         while len(self._free) > self.keep:
             self._free.pop(0).destroy()
 
+
+@dataclass
+class PackedBuffer:
+    """A buffer of :meth:`MappedReads.take_packed` and its ranges ((offset, size) each)."""
+
+    buffer: wgpu.GPUBuffer
+    ranges: list[tuple[int, int]]
+    nbytes: int   # up to the end of the last range's alignment
+
     @property
-    def mapped(self) -> int:
-        """Buffers handed back but not yet unmapped (tests)."""
-        return len(self._returned)
+    def bindings(self) -> list[tuple[wgpu.GPUBuffer, int, int]]:
+        """(buffer, offset, size) of each range, as GpuContext.bind_group binds a range."""
+        return [(self.buffer, off, size) for off, size in self.ranges]
 
 
 def packed_ranges(sizes: list[int], alignment: int) -> tuple[list[tuple[int, int]], int]:

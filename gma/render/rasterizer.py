@@ -20,7 +20,7 @@ import wgpu
 from gma.core.camera import Camera
 from gma.gpu import GpuContext, PassTimer
 from gma.gpu.context import STORAGE
-from gma.gpu.mapped_reads import packed_ranges
+from gma.gpu.mapped_reads import PackedBuffer
 from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
@@ -434,7 +434,8 @@ class SurfelRasterizer:
         # mapping the returned arrays are (gma/gpu/mapped_reads.py).
         in_place = read_images and ctx.reads_in_place
         if in_place:
-            packed, images, image_ranges, packed_bytes = self._packed_images(hw, c)
+            packed = self._packed_images(hw, c)
+            images = packed.bindings[1:]
         else:
             images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
                       image("out.depth", 4 * hw)]
@@ -444,7 +445,7 @@ class SurfelRasterizer:
                                          images + replayed, timer)
         image_reads = _image_reads(images, camera, c) if read_images and not in_place else []
         if in_place:
-            stats, host = self._read_packed(st, n, packed, image_ranges, packed_bytes)
+            stats, host = self._read_packed(st, n, packed)
         elif n:
             stats, *host = ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
         else:
@@ -460,11 +461,12 @@ class SurfelRasterizer:
                 self.texels.give_back(lists[3])
             if in_place:   # the first images' buffer stays mapped until their arrays are gone
                 del host
-                packed, images, image_ranges, packed_bytes = self._packed_images(hw, c)
+                packed = self._packed_images(hw, c)
+                images = packed.bindings[1:]
             lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
                                              images + replayed, timer)
             if in_place:
-                host = self._read_packed(st, 0, packed, image_ranges, packed_bytes)[1]
+                host = self._read_packed(st, 0, packed)[1]
             else:
                 host = ctx.read_many(image_reads)
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
@@ -489,26 +491,21 @@ class SurfelRasterizer:
             ctx.recycler.release_with(state, kept)
         return state
 
-    def _packed_images(self, hw: int, c: int):
-        """A mappable buffer for a render's counts (16 bytes) and images, the images' (buffer, offset,
-        size) bindings, their ranges and the bytes to read."""
-        ranges, total = packed_ranges([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], self._offset_alignment())
-        packed = self.ctx.mapped_reads.take(total, "out.images", reuse=self.ctx.recycler.enabled)
-        return packed, [(packed, off, size) for off, size in ranges[1:]], ranges, total
+    def _packed_images(self, hw: int, c: int) -> PackedBuffer:
+        """A mappable buffer for a render's counts (16 bytes, range 0) and its four images (ranges 1-4)."""
+        return self.ctx.mapped_reads.take_packed([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], "out.images",
+                                                 reuse=self.ctx.recycler.enabled)
 
-    def _read_packed(self, st: ProjectionState, n: int, packed, ranges, total):
+    def _read_packed(self, st: ProjectionState, n: int, packed: PackedBuffer):
         """Copy projection's counts beside the images (when there are surfels) and read both in place:
         (counts, [color, alpha, normal, depth]) as flat arrays over the mapping."""
         if n:
             enc = self.ctx.device.create_command_encoder()
-            enc.copy_buffer_to_buffer(st.stats, 0, packed, 0, 16)
+            enc.copy_buffer_to_buffer(st.stats, 0, packed.buffer, 0, 16)
             self.ctx.submit(enc)
-        raw = self.ctx.read_in_place(packed, total)
-        stats = raw[:16].view(np.uint32) if n else np.zeros(4, np.uint32)
-        return stats, [raw[off:off + size].view(np.float32) for off, size in ranges[1:]]
-
-    def _offset_alignment(self) -> int:
-        return int(self.ctx.device.limits.get("min-storage-buffer-offset-alignment", 256))
+        counts, *images = self.ctx.read_in_place(packed)
+        stats = counts.view(np.uint32) if n else np.zeros(4, np.uint32)
+        return stats, [a.view(np.float32) for a in images]
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
@@ -587,9 +584,8 @@ class SurfelRasterizer:
         grad_sizes = [4 * k * n for k in (3, 4, 2, 1, c)]
         in_place = colors_out and ctx.reads_in_place
         if in_place:
-            grad_ranges, grad_bytes = packed_ranges(grad_sizes, self._offset_alignment())
-            packed = ctx.mapped_reads.take(grad_bytes, "v_surfels", reuse=ctx.recycler.enabled)
-            *outs, v_colors = [(packed, off, size) for off, size in grad_ranges]
+            packed = ctx.mapped_reads.take_packed(grad_sizes, "v_surfels", reuse=ctx.recycler.enabled)
+            *outs, v_colors = packed.bindings
         elif colors_out:
             v_colors = take(4 * c * n, "v_colors", STORAGE)
             recycled.append(v_colors)
@@ -648,9 +644,7 @@ class SurfelRasterizer:
             timer.resolve(enc)
         ctx.submit(enc)
         if in_place:
-            raw = ctx.read_in_place(packed, grad_bytes)
-            means, quats, scales, opacities, colors = (raw[off:off + size].view(np.float32)
-                                                       for off, size in grad_ranges)
+            means, quats, scales, opacities, colors = (a.view(np.float32) for a in ctx.read_in_place(packed))
         else:
             means, quats, scales, opacities, colors = ctx.read_many(
                 [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
