@@ -17,8 +17,7 @@ from gma.core.errors import DeviceError
 from gma.gpu.adapter import NoAdapterError, describe, select_adapter
 from gma.gpu.bind_groups import BindGroupCache
 from gma.gpu.host_memory import HostMemoryPool
-from gma.gpu.mapped_reads import MappedReads, PackedBuffer, packed_ranges
-from gma.gpu.mapped_writes import MappedWrites
+from gma.gpu.mapped_reads import MappedReads, PackedBuffer
 from gma.gpu.recycle import BufferRecycler
 from gma.gpu.shaders import ShaderLibrary
 from gma.gpu.transfers import TransferStats
@@ -74,7 +73,6 @@ class GpuContext:
     _constants: OrderedDict = field(default_factory=OrderedDict, repr=False)
     _constants_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
     _mapped_reads: MappedReads | None = field(default=None, repr=False)
-    _mapped_writes: MappedWrites | None = field(default=None, repr=False)
 
     @classmethod
     def create(cls, preference: str | None = None, disable_features: tuple[str, ...] = ()) -> GpuContext:
@@ -108,29 +106,6 @@ class GpuContext:
         if self._mapped_reads is None:
             self._mapped_reads = MappedReads(self.device)
         return self._mapped_reads
-
-    def upload_in_place(self, arrays: list[np.ndarray], label: str) -> PackedBuffer | None:
-        """``arrays`` written into ranges of one storage buffer through its mapping (gma/gpu/mapped_writes.py),
-        or None where buffers cannot be mapped so (not :attr:`reads_in_place`) or the ranges would not fit
-        one binding's limit (then :meth:`write`). The caller gives the buffer back to
-        :attr:`mapped_writes` (``release_with`` or ``give_back``)."""
-        arrays = [np.ascontiguousarray(a) for a in arrays]
-        if not self.reads_in_place or packed_ranges([a.nbytes for a in arrays], self.storage_alignment)[1] > \
-                self.max_binding_bytes:
-            return None
-        with self.transfers.upload(sum(a.nbytes for a in arrays)):
-            return self.mapped_writes.upload(arrays, self.storage_alignment, label, reuse=self.recycler.enabled)
-
-    @property
-    def mapped_writes(self) -> MappedWrites:
-        if self._mapped_writes is None:
-            self._mapped_writes = MappedWrites(self.device)
-        return self._mapped_writes
-
-    @property
-    def storage_alignment(self) -> int:
-        """Bytes at which a storage binding's offset must lie."""
-        return int(self.device.limits.get("min-storage-buffer-offset-alignment", 256))
 
     def read_in_place(self, packed: PackedBuffer) -> list[np.ndarray]:
         """The ranges of a buffer from :meth:`MappedReads.take_packed`, once the GPU has written them, as

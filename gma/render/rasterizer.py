@@ -469,8 +469,6 @@ class SurfelRasterizer:
                 host = self._read_packed(0, packed)[1]
             else:
                 host = ctx.read_many(image_reads)
-        if in_place:   # the GPU is idle: map the upload buffers that came back for the next call's inputs
-            ctx.mapped_writes.prepare()
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
         self.isect_capacity_hint = max(self.isect_capacity_hint, num_isects)
         self.depth_bits_hint = max(self.depth_bits_hint, needed_bits)
@@ -510,8 +508,8 @@ class SurfelRasterizer:
                             counts_to: PackedBuffer | None = None):
         """Encode and submit everything after projection (see :meth:`forward`): the depth sort by
         ``key_bits``, then binning into lists of ``capacity`` intersections and rasterization; then
-        projection's counts are copied to the front of ``counts_to`` (in the same submission: a submission
-        of its own cost ~0.3-0.5 ms more between the last pass and the read)."""
+        projection's counts are copied to the front of ``counts_to`` (in the same submission: one of its own
+        is one more round through lavapipe's queue before the images can be read)."""
         enc = self.ctx.device.create_command_encoder()
         self.depth_order(enc, st, surfels.count, key_bits, timer)
         lists = self.bin_and_rasterize(enc, surfels, camera, st, capacity, background_buf, targets, timer)
@@ -543,7 +541,7 @@ class SurfelRasterizer:
         # gradients are uploaded in full and project_bwd writes every surfel's gradients. Accumulators
         # (the atomics' v_proj and v_colors) and a missing upstream's zeros are not recycled.
         take, recycled = ctx.recycler.take, []
-        upstream, given = {}, {}
+        upstream = {}
         for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
                                               (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
             if (binding >= 10 and not normal_depth) or (binding == 9 and arr is None):
@@ -551,15 +549,10 @@ class SurfelRasterizer:
             if arr is None:
                 upstream[binding] = self._zeros(4 * hw * per_pixel)
             else:
-                given[binding] = (name, np.ascontiguousarray(arr, np.float32).reshape(-1))
-        # Uploaded in place on CPU adapters (one buffer for all: one map), else written.
-        uploaded = ctx.upload_in_place([data for _, data in given.values()], "v_images") if given else None
-        if uploaded is not None:
-            upstream.update(zip(given, uploaded.bindings))
-        for binding, (name, data) in given.items() if uploaded is None else ():
-            upstream[binding] = take(data.nbytes, name, STORAGE)
-            ctx.write(upstream[binding], data)
-            recycled.append(upstream[binding])
+                data = np.ascontiguousarray(arr, np.float32).reshape(-1)
+                upstream[binding] = take(data.nbytes, name, STORAGE)
+                ctx.write(upstream[binding], data)
+                recycled.append(upstream[binding])
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
@@ -659,8 +652,6 @@ class SurfelRasterizer:
                 [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
                  (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
         ctx.recycler.give_back(recycled)  # read back: nothing else holds them
-        if uploaded is not None:
-            ctx.mapped_writes.give_back(uploaded.buffer)   # and mapped again for the next backward
         return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
                            colors.reshape(n, c))
 

@@ -10,20 +10,17 @@ import wgpu
 from gma.gpu import GpuContext
 from gma.gpu.context import STORAGE
 
-Binding = wgpu.GPUBuffer | tuple[wgpu.GPUBuffer, int, int]   # as GpuContext.bind_group binds them
-
 
 @dataclass
 class SurfelBuffers:
     """Packed float32 storage buffers (no vec3 padding): ``means`` [N, 3], ``quats`` [N, 4] (w, x, y, z),
-    ``scales`` [N, 2] (activated, > 0), ``opacities`` [N] (activated), ``colors`` [N, C]. Each a buffer, or
-    a (buffer, offset, size) range of one (see from_arrays)."""
+    ``scales`` [N, 2] (activated, > 0), ``opacities`` [N] (activated), ``colors`` [N, C]."""
 
-    means: Binding
-    quats: Binding
-    scales: Binding
-    opacities: Binding
-    colors: Binding
+    means: wgpu.GPUBuffer
+    quats: wgpu.GPUBuffer
+    scales: wgpu.GPUBuffer
+    opacities: wgpu.GPUBuffer
+    colors: wgpu.GPUBuffer
     count: int
     channels: int
 
@@ -50,18 +47,8 @@ class SurfelBuffers:
 
     @staticmethod
     def from_arrays(ctx: GpuContext, means, quats, scales, opacities, colors, recycled: bool = False) -> SurfelBuffers:
-        """Upload host arrays (numpy or CPU torch tensors) of the shapes above (``recycled``: see allocate).
-        Recycled uploads on CPU adapters go straight into ranges of one mapped buffer
-        (``GpuContext.upload_in_place``), and the fields are then (buffer, offset, size) ranges: bind them,
-        do not write them."""
+        """Upload host arrays (numpy or CPU torch tensors) of the shapes above (``recycled``: see allocate)."""
         colors = np.asarray(colors, np.float32)
-        if recycled:
-            arrays = [np.asarray(a, np.float32) for a in (means, quats, scales, opacities)] + [colors]
-            packed = ctx.upload_in_place(arrays, "surfels.packed")
-            if packed is not None:
-                bufs = SurfelBuffers(*packed.bindings, count=len(colors), channels=colors.shape[1])
-                ctx.mapped_writes.release_with(bufs, packed.buffer)
-                return bufs
         bufs = SurfelBuffers.allocate(ctx, len(colors), colors.shape[1], recycled)
         bufs.write(ctx, means, quats, scales, opacities, colors)
         return bufs
