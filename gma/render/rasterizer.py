@@ -445,7 +445,7 @@ class SurfelRasterizer:
                                          images + replayed, timer, packed if in_place and n else None)
         image_reads = _image_reads(images, camera, c) if read_images and not in_place else []
         if in_place:
-            stats, host = self._read_packed(n, packed)
+            stats, host = self._read_packed(packed, counted=n > 0)
         elif n:
             stats, *host = ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
         else:
@@ -466,7 +466,7 @@ class SurfelRasterizer:
             lists = self._sort_bin_rasterize(surfels, camera, st, num_isects, needed_bits, background_buf,
                                              images + replayed, timer)
             if in_place:
-                host = self._read_packed(0, packed)[1]
+                host = self._read_packed(packed, counted=False)[1]
             else:
                 host = ctx.read_many(image_reads)
         # Hints only grow, so that views of one scene with more or fewer intersections do not render twice.
@@ -496,12 +496,12 @@ class SurfelRasterizer:
         return self.ctx.mapped_reads.take_packed([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], "out.images",
                                                  reuse=self.ctx.recycler.enabled)
 
-    def _read_packed(self, n: int, packed: PackedBuffer):
-        """Read a render's counts (copied beside the images by :meth:`_sort_bin_rasterize` when there are
-        surfels) and images in place: (counts, [color, alpha, normal, depth]) as flat arrays over the
+    def _read_packed(self, packed: PackedBuffer, counted: bool):
+        """Read a render's images in place, and its counts where :meth:`_sort_bin_rasterize` copied them in
+        front (``counted``; zeros otherwise): (counts, [color, alpha, normal, depth]) as flat arrays over the
         mapping."""
         counts, *images = self.ctx.read_in_place(packed)
-        stats = counts.view(np.uint32) if n else np.zeros(4, np.uint32)
+        stats = counts.view(np.uint32) if counted else np.zeros(4, np.uint32)
         return stats, [a.view(np.float32) for a in images]
 
     def _sort_bin_rasterize(self, surfels, camera, st, capacity, key_bits, background_buf, targets, timer,
