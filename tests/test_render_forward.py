@@ -54,6 +54,17 @@ def test_background_and_channels(gpu):
         compare(got, want)
 
 
+@pytest.mark.parametrize("channels", [1, 2, 4])
+def test_channel_counts_in_whole_rows(gpu, channels):
+    """Widths that are a multiple of 4, where the tile walk stores each image row's four pixels at once
+    (write_block_pixels in rasterize_fwd.wgsl: the channels interleaved by shuffles), and a height that
+    ends inside a block."""
+    scene = torch_scene(400, seed=11, channels=channels)
+    bg = torch.linspace(0.1, 0.9, channels)
+    got, want = render_both(scene, default_camera(68, 44), background=bg, ctx=gpu)
+    compare(got, want)
+
+
 def test_more_surfels_on_one_tile_than_a_batch(gpu):
     """600 faint overlapping surfels on one tile: compositing must continue across staged batches."""
     rng = np.random.default_rng(3)

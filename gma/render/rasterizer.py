@@ -437,9 +437,9 @@ class SurfelRasterizer:
             packed = self._packed_images(hw, c)
             images = packed.bindings[1:]
         else:
-            images = [image("out.color", 4 * hw * c), image("out.alpha", 4 * hw), image("out.normal", 12 * hw),
-                      image("out.depth", 4 * hw)]
-        replayed = [image("out.final_t", 4 * hw), image("out.last", 4 * hw)] if replay else []
+            images = [image("out.color", image_bytes(hw * c)), image("out.alpha", image_bytes(hw)),
+                      image("out.normal", image_bytes(3 * hw)), image("out.depth", image_bytes(hw))]
+        replayed = [image("out.final_t", image_bytes(hw)), image("out.last", image_bytes(hw))] if replay else []
         background_buf = ctx.constant(bg, "background")  # never written: states of earlier renders share it
         lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
                                          images + replayed, timer, packed if in_place and n else None)
@@ -493,7 +493,7 @@ class SurfelRasterizer:
 
     def _packed_images(self, hw: int, c: int) -> PackedBuffer:
         """A mappable buffer for a render's counts (16 bytes, range 0) and its four images (ranges 1-4)."""
-        return self.ctx.mapped_reads.take_packed([16, 4 * hw * c, 4 * hw, 12 * hw, 4 * hw], "out.images",
+        return self.ctx.mapped_reads.take_packed([16, *(image_bytes(k * hw) for k in (c, 1, 3, 1))], "out.images",
                                                  reuse=self.ctx.recycler.enabled)
 
     def _read_packed(self, packed: PackedBuffer, counted: bool):
@@ -731,7 +731,16 @@ def _image_reads(images: list, camera: Camera, channels: int) -> list:
 
 
 def _images_from(arrays: list[np.ndarray], camera: Camera, channels: int) -> ImageOutputs:
+    """The (color, alpha, normal, depth) images from flat arrays (read in place, they run on to the end of
+    their padded ranges: :func:`image_bytes`)."""
     h, w = camera.height, camera.width
-    color, alpha, normal, depth = arrays
+    color, alpha, normal, depth = (a[:h * w * k] for a, k in zip(arrays, (channels, 1, 3, 1)))
     return ImageOutputs(color.reshape(h, w, channels), alpha.reshape(h, w, 1), normal.reshape(h, w, 3),
                         depth.reshape(h, w, 1))
+
+
+def image_bytes(values: int) -> int:
+    """Bytes of an output image of ``values`` floats as the forward rasterizer binds it: whole vec4s (the
+    shader declares its images as vec4 arrays, so that the tile walk stores four pixels at once; a partial
+    last vec4 would lie outside the binding)."""
+    return -(-4 * values // 16) * 16

@@ -103,13 +103,6 @@ fn upstream_color4(p: u32) -> vec4<f32> {
                      select(0.0, v_out_color[base + min(3u, last)], CHANNELS > 3u));
 }
 
-fn background4() -> vec4<f32> {
-    let last = CHANNELS - 1u;
-    return vec4<f32>(background[0], select(0.0, background[min(1u, last)], CHANNELS > 1u),
-                     select(0.0, background[min(2u, last)], CHANNELS > 2u),
-                     select(0.0, background[min(3u, last)], CHANNELS > 3u));
-}
-
 #if USE_SUBGROUPS
 // The subgroup variant (CPU drivers; at most 4 channels) gives each thread four pixels of the tile, in
 // one column at rows y, y + 2, y + 4, y + 6 (tile_pixel_quad in rasterize_core.wgsl), so that a

@@ -29,6 +29,14 @@
 // program order (this variant serves CPU drivers only).
 var<workgroup> hit_entries: array<u32, (BATCH + SG) * (RASTER_THREADS / SG)>;
 
+// The first four channels of the background, zeros past CHANNELS.
+fn background4() -> vec4<f32> {
+    let last = CHANNELS - 1u;
+    return vec4<f32>(background[0], select(0.0, background[min(1u, last)], CHANNELS > 1u),
+                     select(0.0, background[min(2u, last)], CHANNELS > 2u),
+                     select(0.0, background[min(3u, last)], CHANNELS > 3u));
+}
+
 #if WORK_QUEUE
 // The tile walks' queue of tiles (common/work_queue.wgsl): one workgroup per driver thread, each taking
 // the next tile, in row order, until none is left.

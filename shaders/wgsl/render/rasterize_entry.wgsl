@@ -1,5 +1,16 @@
 // The forward rasterizers' entry point, shared by the buffer and texture variants: each defines
-// write_pixel(pix, result) and includes this file (WGSL resolves module-scope names in any order).
+// write_pixel(pix, result), with TILE_WALK also write_block_pixels (a 4x8 block's results), and includes
+// this file (WGSL resolves module-scope names in any order).
+
+#if USE_SUBGROUPS
+// A thread's four pixels (first pixel `pix`, then ROW_STEPs down: tile_pixel_quad), one by one.
+fn write_quad_pixels(pix: vec2<u32>, a: PixelResult, b: PixelResult, c: PixelResult, d: PixelResult) {
+    write_pixel(pix, a);
+    write_pixel(pix + ROW_STEP, b);
+    write_pixel(pix + 2u * ROW_STEP, c);
+    write_pixel(pix + 3u * ROW_STEP, d);
+}
+#endif
 
 // One-dimensional workgroups: subgroup builtins are only defined for those.
 #if TILE_WALK
@@ -15,10 +26,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var c: PixelBlend;
     var d: PixelBlend;
     composite_quad(wg.y * params.tile_grid.x + wg.x, pix, sg_lane, sg_id, &a, &b, &c, &d);
-    write_pixel(pix, a.result);
-    write_pixel(pix + ROW_STEP, b.result);
-    write_pixel(pix + 2u * ROW_STEP, c.result);
-    write_pixel(pix + 3u * ROW_STEP, d.result);
+    write_quad_pixels(pix, a.result, b.result, c.result, d.result);
 }
 #else
 @compute @workgroup_size(256)

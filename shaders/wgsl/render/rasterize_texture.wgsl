@@ -15,4 +15,12 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
     textureStore(out_texture, vec2<i32>(pix), vec4<f32>(clamp(rgb, vec3<f32>(0.0), vec3<f32>(1.0)), 1.0 - T));
 }
 
+#if TILE_WALK
+// The tile walk's block (see rasterize_fwd.wgsl): each lane its four pixels.
+fn write_block_pixels(block: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult, c: PixelResult,
+                      d: PixelResult) {
+    write_quad_pixels(block + vec2<u32>(sg_lane & 3u, sg_lane >> 2u), a, b, c, d);
+}
+#endif
+
 #include "render/rasterize_entry.wgsl"

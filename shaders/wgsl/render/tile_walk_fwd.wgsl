@@ -101,12 +101,9 @@ fn end_block_batch(r: ptr<function, BlockBlend>) {
     *r = BlockBlend(a, b, c, d);
 }
 
+// Block g's results, through the variant's write_block_pixels (rasterize_fwd.wgsl, rasterize_texture.wgsl).
 fn write_block(origin: vec2<u32>, g: u32, sg_lane: u32, r: BlockBlend) {
-    let pix = block_first_pixel(origin, g, sg_lane);
-    write_pixel(pix, r.a.result);
-    write_pixel(pix + ROW_STEP, r.b.result);
-    write_pixel(pix + 2u * ROW_STEP, r.c.result);
-    write_pixel(pix + 3u * ROW_STEP, r.d.result);
+    write_block_pixels(block_first_pixel(origin, g, 0u), sg_lane, r.a.result, r.b.result, r.c.result, r.d.result);
 }
 
 #include "render/tile_walk_main.wgsl"
