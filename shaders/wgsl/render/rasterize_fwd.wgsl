@@ -25,10 +25,9 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
         out_color[i >> 2u][i & 3u] = r.color[c / 4u][c % 4u] + r.transmittance * background[c];
     }
     out_alpha[p >> 2u][p & 3u] = 1.0 - r.transmittance;
-    for (var c = 0u; c < 3u; c++) {
-        let i = 3u * p + c;
-        out_normal[i >> 2u][i & 3u] = r.normal[c];
-    }
+    out_normal[(3u * p) >> 2u][(3u * p) & 3u] = r.normal.x;
+    out_normal[(3u * p + 1u) >> 2u][(3u * p + 1u) & 3u] = r.normal.y;
+    out_normal[(3u * p + 2u) >> 2u][(3u * p + 2u) & 3u] = r.normal.z;
     out_depth[p >> 2u][p & 3u] = r.depth;
 #if REPLAY
     out_final_t[p >> 2u][p & 3u] = r.transmittance;
@@ -38,17 +37,18 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
 
 #if TILE_WALK
 // The tile walk's stores of one 4x8 block whose top left pixel is `block` (tile_walk_fwd.wgsl: lane l holds
-// the pixels of column l & 3 in rows (l >> 2) + 2 k, k = 0-3, whose results are a-d). Where the image's
+// the pixels of column l & 3 in rows (l >> 2) + 2 k, k = 0-3, the first at `pix`, whose results are a-d;
+// the tile walk serves at most 4 channels, so a.color[0] holds them all). Where the image's
 // width is a multiple of 4, every row of the block starts at a multiple of 4 pixels, and lane j stores row j
 // (gathered by shuffles) with one vec4 store per four values of each image, instead of each lane storing
 // its four pixels' values one by one: lavapipe runs a store whose address differs between lanes as a loop
 // over the lanes per component, so a vec4 costs about as much as one or two scalars. (Standard scene,
 // 100k surfels, shader_ab.py, 12 and 16 rounds: forward rasterize 0.924x and 0.950x; avatar-like surfels
 // 0.925x; images bit-identical.)
-fn write_block_pixels(block: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult, c: PixelResult,
-                      d: PixelResult) {
-    if params.image_size.x % 4u != 0u || CHANNELS > 4u {   // uniform: pixel by pixel
-        write_quad_pixels(block + vec2<u32>(sg_lane & 3u, sg_lane >> 2u), a, b, c, d);
+fn write_block_pixels(block: vec2<u32>, pix: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult,
+                      c: PixelResult, d: PixelResult) {
+    if params.image_size.x % 4u != 0u {   // uniform: pixel by pixel
+        write_quad_pixels(pix, a, b, c, d);
         return;
     }
     if block.x >= params.image_size.x {

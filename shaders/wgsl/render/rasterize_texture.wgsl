@@ -17,9 +17,9 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
 
 #if TILE_WALK
 // The tile walk's block (see rasterize_fwd.wgsl): each lane its four pixels.
-fn write_block_pixels(block: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult, c: PixelResult,
-                      d: PixelResult) {
-    write_quad_pixels(block + vec2<u32>(sg_lane & 3u, sg_lane >> 2u), a, b, c, d);
+fn write_block_pixels(block: vec2<u32>, pix: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult,
+                      c: PixelResult, d: PixelResult) {
+    write_quad_pixels(pix, a, b, c, d);
 }
 #endif
 

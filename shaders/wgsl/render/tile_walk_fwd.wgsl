@@ -101,9 +101,11 @@ fn end_block_batch(r: ptr<function, BlockBlend>) {
     *r = BlockBlend(a, b, c, d);
 }
 
-// Block g's results, through the variant's write_block_pixels (rasterize_fwd.wgsl, rasterize_texture.wgsl).
+// Block g's results, through the variant's write_block_pixels (rasterize_fwd.wgsl, rasterize_texture.wgsl):
+// the block's first pixel (lane 0's) and this lane's.
 fn write_block(origin: vec2<u32>, g: u32, sg_lane: u32, r: BlockBlend) {
-    write_block_pixels(block_first_pixel(origin, g, 0u), sg_lane, r.a.result, r.b.result, r.c.result, r.d.result);
+    write_block_pixels(block_first_pixel(origin, g, 0u), block_first_pixel(origin, g, sg_lane), sg_lane,
+                       r.a.result, r.b.result, r.c.result, r.d.result);
 }
 
 #include "render/tile_walk_main.wgsl"
