@@ -30,7 +30,7 @@ fn main() {
     out[28] = f32(params.num_surfels); out[29] = f32(params.isect_capacity); out[30] = f32(params.num_channels);
     let s = surfels[1];
     for (var r = 0; r < 4; r++) {
-        out[32 + r] = s.t0[r]; out[36 + r] = s.t1[r]; out[40 + r] = s.t2[r]; out[44 + r] = s.normal_depth[r];
+        out[32 + r] = s.p_ref[r]; out[36 + r] = s.dp_dx[r]; out[40 + r] = s.dp_dy[r]; out[44 + r] = s.normal_depth[r];
     }
     out[48] = f32(info.groups_x); out[49] = f32(info.groups_y); out[50] = f32(info.groups_z);
     out[51] = f32(info.count);
@@ -46,8 +46,8 @@ def test_struct_layouts_match_wgsl(gpu):
     K = np.array([[100, 0.25, 30], [0, 90, 20], [0, 0, 1]], np.float32)
     params = render_params(view, K, 37, 21, 1234, 5678, 3)
     surfels = np.zeros(2, PROJECTED_SURFEL)
-    surfels[1]["t0"], surfels[1]["t1"] = [1, 2, 3, 4], [5, 6, 7, 8]
-    surfels[1]["t2"], surfels[1]["normal_depth"] = [9, 10, 11, 12], [13, 14, 15, 16]
+    surfels[1]["p_ref"], surfels[1]["dp_dx"] = [1, 2, 3, 4], [5, 6, 7, 8]
+    surfels[1]["dp_dy"], surfels[1]["normal_depth"] = [9, 10, 11, 12], [13, 14, 15, 16]
     info = np.zeros((), DISPATCH_INFO)
     info["groups"], info["count"] = (3, 1, 1), 4000
     code = gpu.shaders.source("common/render_types.wgsl") + KERNEL

@@ -29,9 +29,9 @@ assert RENDER_PARAMS.itemsize == 128
 
 PROJECTED_SURFEL = np.dtype(
     [
-        ("t0", "<f4", (4,)),            # T row 0, mu2d.x
-        ("t1", "<f4", (4,)),            # T row 1, mu2d.y
-        ("t2", "<f4", (4,)),            # T row 2, opacity
+        ("p_ref", "<f4", (4,)),         # ray-splat intersection at the reference point c, c.x
+        ("dp_dx", "<f4", (4,)),         # its change per pixel in x, c.y
+        ("dp_dy", "<f4", (4,)),         # its change per pixel in y, opacity
         ("normal_depth", "<f4", (4,)),  # camera-space normal, depth
     ]
 )

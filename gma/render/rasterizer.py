@@ -158,7 +158,7 @@ class SurfelRasterizer:
         # gradient records, from textures (surfel_texels.py), where they fit; tests switch it off to check
         # that the buffer reads give the same images and gradients.
         self.use_surfel_texels = True
-        # With the tile walks projection puts each surfel's colour beside its T rows and its normal and
+        # With the tile walks projection puts each surfel's colour beside its ray plane and its normal and
         # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
         # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
         self.use_walk_layout = True

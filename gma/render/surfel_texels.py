@@ -3,7 +3,8 @@
 Per group of 8 intersections each lane of a tile walk (tile_walk_fwd.wgsl, tile_walk_bwd.wgsl) reads one
 surfel's projection and colour (five vec4s; the backward four) at an index of its own. The tile walks'
 projection writes them in its own layout (WALK_LAYOUT in project_fwd.wgsl; surfel_texels.wgsl): the
-``projected`` buffer's four vec4s per surfel are its T rows and its colour, the ``colors4`` buffer's vec4
+``projected`` buffer's four vec4s per surfel are its ray plane (the ray transform in the form the
+rasterizers evaluate, ray_plane.wgsl) and its colour, the ``colors4`` buffer's vec4
 its normal and depth, so that the backward walk reads one cache line per surfel. Lavapipe turns a storage
 buffer read at a lane-varying index into a loop over the lanes with a bounds check and a branch per lane
 and component, whereas it fetches a texel of a storage texture for all lanes at once: a vec4 gather from

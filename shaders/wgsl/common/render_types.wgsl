@@ -40,12 +40,19 @@ struct RenderParams {
     reserved: u32,
 };
 
-// One projected surfel as the rasterizer needs it (64 bytes). T is the 3x3 ray transform
-// K [R s_u t_u, R s_v t_v, mu_c]; rows are stored with the projected centre and opacity in w.
+// One projected surfel as the rasterizer needs it (64 bytes). With the 3x3 ray transform
+// T = K [R s_u t_u, R s_v t_v, mu_c] (rows T0, T1, T2), the ray through pixel x = (x, y) meets the surfel
+// at p(x) = (x T2 - T0) x (y T2 - T1), whose (u, v) = p.xy / p.z (docs/design.md, renderer contract).
+// The y T2 x x T2 term vanishes, so p is linear in the pixel: p(x) = p(c) + (x - c.x) dp_dx + (y - c.y) dp_dy
+// with dp_dx = T1 x T2 and dp_dy = T2 x T0. Projection stores that form about a reference point c, the
+// projected centre clamped to the image's surroundings (ray_plane_reference in project_fwd.wgsl), so that
+// a rasterizer evaluates p with two multiply-adds per component instead of two cross products, and the
+// backward's d loss / dp sums need no cross products per hit (project_bwd.wgsl turns them into d loss / dT
+// once per surfel). The reference point is also the centre of the 2D-distance floor: see there.
 struct ProjectedSurfel {
-    t0: vec4<f32>,              // T row 0, mu2d.x
-    t1: vec4<f32>,              // T row 1, mu2d.y
-    t2: vec4<f32>,              // T row 2, opacity
+    p_ref: vec4<f32>,           // p(c), c.x
+    dp_dx: vec4<f32>,           // T1 x T2, c.y
+    dp_dy: vec4<f32>,           // T2 x T0, opacity
     normal_depth: vec4<f32>,    // camera-space normal facing the camera, camera-space depth; in the tile
                                 // walks' buffers (WALK_LAYOUT, surfel_texels.wgsl) the colour vec4 instead
 };

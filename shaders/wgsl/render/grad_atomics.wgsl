@@ -44,10 +44,10 @@ fn add_color(i: u32, v: f32) {
 #endif
 
 // Layout of the 16 projection gradients of one surfel (mirrored in gma/render/layouts.py).
-const G_T0: u32 = 0u;        // dL/dT row 0 (3)
-const G_T1: u32 = 3u;        // dL/dT row 1 (3)
-const G_T2: u32 = 6u;        // dL/dT row 2 (3)
-const G_MU2D: u32 = 9u;      // dL/dmu2d (2)
+const G_P_REF: u32 = 0u;     // dL/dp_ref (3): the ray plane (ProjectedSurfel; project_bwd.wgsl turns
+const G_DP_DX: u32 = 3u;     // dL/ddp_dx (3)   these three into dL/dT)
+const G_DP_DY: u32 = 6u;     // dL/ddp_dy (3)
+const G_MU2D: u32 = 9u;      // dL/dc (2), the reference point: the projected centre where it is not clamped
 const G_OPACITY: u32 = 11u;  // dL/dopacity (1)
 const G_NORMAL: u32 = 12u;   // dL/dnormal, camera space (3)
 const G_DEPTH: u32 = 15u;    // dL/ddepth (1)

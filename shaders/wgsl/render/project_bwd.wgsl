@@ -1,5 +1,6 @@
 // Projection backward: one thread per surfel. Chains the rasterizer's gradients with respect to the ray
-// transform T, the projected centre, the camera-space normal and the depth down to means, quaternions
+// plane (ProjectedSurfel: the ray transform T in the form the rasterizers evaluate, ray_plane.wgsl), the
+// reference point (the projected centre), the camera-space normal and the depth down to means, quaternions
 // and scales, by recomputing the forward projection (cheaper than storing its intermediates).
 // Define COLOR_IN_PROJ (with CHANNELS <= 4): the rasterizer left no normal or depth gradients and put
 // the colour gradients in their slots (12..); they are copied out to v_colors here (rasterize_bwd.wgsl).
@@ -11,6 +12,7 @@
 // COLORS_OUT: this pass writes v_colors (with COLOR_IN_PROJ or GRAD_RECORDS).
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
+#include "render/ray_plane.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
 @group(0) @binding(1) var<storage, read> means: array<f32>;        // [N, 3]
@@ -46,10 +48,8 @@ fn load_record(t: u32) -> vec4<f32> {
 
 // The rasterizer's gradients of one surfel (see G_* in grad_atomics.wgsl).
 struct RasterGrads {
-    v_t0: vec3<f32>,
-    v_t1: vec3<f32>,
-    v_t2: vec3<f32>,
-    v_mu2d: vec2<f32>,
+    v_plane: RayPlane,   // d loss / d(p_ref, dp_dx, dp_dy)
+    v_mu2d: vec2<f32>,   // d loss / d reference point
     v_opacity: f32,
     v_normal: vec3<f32>,
     v_depth: f32,
@@ -65,7 +65,7 @@ const RECORD_VEC4S: u32 = 4u;
 
 // Sum of surfel i's records. A record holds V0-15 of store_record pairwise, (V[l], V[l + 8]) as vec2
 // number l, so its vec4s are (V0 V8 V1 V9) (V2 V10 V3 V11) (V4 V12 V5 V13) (V6 V14 V7 V15), with
-// V0-2 = dL/dT0, V3 opacity, V4-6 = dL/dT1, V7 mu2d.x, V8-10 = dL/dT2, V11 mu2d.y, V12-15 = normal and
+// V0-2 = dL/dp_ref, V3 opacity, V4-6 = dL/ddp_dx, V7 c.x, V8-10 = dL/ddp_dy, V11 c.y, V12-15 = normal and
 // depth (a fifth vec4 then holds the colours) or the colours. Tried: one thread per intersection in
 // tile order summing its surfel's records where it holds the first (neighbouring threads gather
 // neighbouring tiles' records): 25 against ~13 ms (standard scene, lavapipe), as most lanes idle.
@@ -92,11 +92,9 @@ fn raster_grads(i: u32) -> RasterGrads {
 #endif
     }
     var g: RasterGrads;
-    g.v_t0 = vec3<f32>(s0.x, s0.z, s1.x);
+    g.v_plane = RayPlane(vec3<f32>(s0.x, s0.z, s1.x), vec3<f32>(s2.x, s2.z, s3.x), vec3<f32>(s0.y, s0.w, s1.y));
     g.v_opacity = s1.z;
-    g.v_t1 = vec3<f32>(s2.x, s2.z, s3.x);
     g.v_mu2d = vec2<f32>(s3.z, s1.w);
-    g.v_t2 = vec3<f32>(s0.y, s0.w, s1.y);
     let tail = vec4<f32>(s2.y, s2.w, s3.y, s3.w);
 #if NORMAL_DEPTH_GRADS
     g.v_normal = tail.xyz;
@@ -113,9 +111,9 @@ fn raster_grads(i: u32) -> RasterGrads {
 fn raster_grads(i: u32) -> RasterGrads {
     let g = i * 16u;
     var r: RasterGrads;
-    r.v_t0 = vec3<f32>(v_proj[g], v_proj[g + 1u], v_proj[g + 2u]);
-    r.v_t1 = vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]);
-    r.v_t2 = vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]);
+    r.v_plane = RayPlane(vec3<f32>(v_proj[g], v_proj[g + 1u], v_proj[g + 2u]),
+                         vec3<f32>(v_proj[g + 3u], v_proj[g + 4u], v_proj[g + 5u]),
+                         vec3<f32>(v_proj[g + 6u], v_proj[g + 7u], v_proj[g + 8u]));
     r.v_mu2d = vec2<f32>(v_proj[g + 9u], v_proj[g + 10u]);
     r.v_opacity = v_proj[g + 11u];
 #if COLOR_IN_PROJ
@@ -215,10 +213,14 @@ fn surfel_work(i: u32) {
     let f = vec3<f32>(1.0, 1.0, -1.0) / denom;
     let mu2d = vec2<f32>(dot(f, t0 * t2), dot(f, t1 * t2));
 
-    var v_t0 = rg.v_t0;
-    var v_t1 = rg.v_t1;
-    var v_t2 = rg.v_t2;
-    let v_mu2d = rg.v_mu2d;
+    // The ray plane about the reference point c that projection chose (ray_plane.wgsl), whose gradient
+    // reaches the projected centre where the clamp left it alone (elsewhere no pixel's alpha depends on it).
+    let c = ray_plane_reference(mu2d, params.image_size);
+    let v_rows = ray_plane_backward(t0, t1, t2, c, rg.v_plane);
+    var v_t0 = v_rows.t0;
+    var v_t1 = v_rows.t1;
+    var v_t2 = v_rows.t2;
+    let v_mu2d = select(vec2<f32>(0.0), rg.v_mu2d, c == mu2d);
     let v_normal = rg.v_normal;
     let v_depth = rg.v_depth;
 

@@ -1,7 +1,8 @@
 // Backward rasterizer: one workgroup per tile, one thread per pixel. Each pixel replays its forward
 // compositing back to front, starting from its final transmittance and last contributor, recovering
 // T before each surfel as T_after / (1 - alpha). Per surfel it produces the gradients of the pixel's
-// outputs with respect to the ray transform T, the projected centre, opacity, colour, normal and depth.
+// outputs with respect to the ray plane (p_ref, dp_dx, dp_dy: ProjectedSurfel; project_bwd.wgsl chains
+// them to the ray transform T), the reference point, opacity, colour, normal and depth.
 // Defines: CHANNELS, BATCH, FLOAT_ATOMICS, USE_SUBGROUPS (+ SG; that variant needs CHANNELS <= 4),
 // ALPHA_GRADS (false when no loss reads the alpha image: its upstream is then zero, its terms dropped),
 // NORMAL_DEPTH_GRADS (false when no loss reads the normal or depth images: their per-surfel gradients
@@ -24,10 +25,10 @@
 
 // Gradients of one pixel with respect to one surfel's parameters.
 struct SurfelGrad {
-    v_t0: vec3<f32>,
-    v_t1: vec3<f32>,
-    v_t2: vec3<f32>,
-    v_mu2d: vec2<f32>,
+    v_p_ref: vec3<f32>,
+    v_dp_dx: vec3<f32>,
+    v_dp_dy: vec3<f32>,
+    v_mu2d: vec2<f32>,   // the reference point's
     v_opacity: f32,
     v_nd: vec4<f32>,     // normal (xyz), depth (w)
 }
@@ -56,15 +57,15 @@ fn alpha_backward(a: AlphaEval, v_alpha_in: f32) -> AlphaGrad {
 #if !USE_SUBGROUPS
 fn flush(sid: u32, g: SurfelGrad) {
     let b = sid * G_STRIDE;
-    add_proj(b + G_T0, g.v_t0.x);
-    add_proj(b + G_T0 + 1u, g.v_t0.y);
-    add_proj(b + G_T0 + 2u, g.v_t0.z);
-    add_proj(b + G_T1, g.v_t1.x);
-    add_proj(b + G_T1 + 1u, g.v_t1.y);
-    add_proj(b + G_T1 + 2u, g.v_t1.z);
-    add_proj(b + G_T2, g.v_t2.x);
-    add_proj(b + G_T2 + 1u, g.v_t2.y);
-    add_proj(b + G_T2 + 2u, g.v_t2.z);
+    add_proj(b + G_P_REF, g.v_p_ref.x);
+    add_proj(b + G_P_REF + 1u, g.v_p_ref.y);
+    add_proj(b + G_P_REF + 2u, g.v_p_ref.z);
+    add_proj(b + G_DP_DX, g.v_dp_dx.x);
+    add_proj(b + G_DP_DX + 1u, g.v_dp_dx.y);
+    add_proj(b + G_DP_DX + 2u, g.v_dp_dx.z);
+    add_proj(b + G_DP_DY, g.v_dp_dy.x);
+    add_proj(b + G_DP_DY + 1u, g.v_dp_dy.y);
+    add_proj(b + G_DP_DY + 2u, g.v_dp_dy.z);
     add_proj(b + G_MU2D, g.v_mu2d.x);
     add_proj(b + G_MU2D + 1u, g.v_mu2d.y);
     add_proj(b + G_OPACITY, g.v_opacity);
@@ -150,7 +151,7 @@ fn start_replay(pix: vec2<u32>) -> PixelReplay {
 }
 
 // A surfel's gradient summed over a thread's four pixels, with the ray-transform part still as d/dp
-// (see main: the T rows' gradient is formed once per thread from these sums).
+// (see main: the ray plane's gradient is formed once per thread from these sums).
 struct QuadGrad {
     v_p: vec3<f32>,      // sum over the pixels of d loss / dp
     v_p_dy: vec3<f32>,   // the same, each pixel's weighted by its row offset dy from the first pixel
@@ -336,8 +337,8 @@ fn scatter_colors8(e: vec4<f32>, sg_lane: u32) -> f32 {
 #endif
 }
 
-// The G_* slot (see proj_component) of value V[j] of flush_scattered8: the vectors' xyz are the T rows,
-// a.w the opacity, b.w and c.w the centre; V12-15 stay (the tail: normal and depth, or the colours).
+// The G_* slot (see proj_component) of value V[j] of flush_scattered8: the vectors' xyz are the ray
+// plane's p_ref, dp_dx, dp_dy, a.w the opacity, b.w and c.w the reference point; V12-15 stay (the tail: normal and depth, or the colours).
 fn value_slot(j: u32) -> u32 {
     let v = j >> 2u;
     let w_slot = select(select(11u, 9u, v == 1u), 10u, v == 2u);
@@ -381,9 +382,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // Field by field: the normal and depth are read only when their gradients are wanted (against
             // one load of the whole surfel, standard scene, 100k surfels, lavapipe, nine alternating runs:
             // the backward's GPU time per forward rasterize pass lower in eight, by ~3 %).
-            let mine_t0 = projected[mine_id].t0;
-            let mine_t1 = projected[mine_id].t1;
-            let mine_t2 = projected[mine_id].t2;
+            let mine_p_ref = projected[mine_id].p_ref;
+            let mine_dp_dx = projected[mine_id].dp_dx;
+            let mine_dp_dy = projected[mine_id].dp_dy;
             let mine_col = load_color4(mine_id);   // in the layout projection wrote (surfel_texels.wgsl)
             for (var kk = 0u; kk < n; kk++) {
                 let k = n - 1u - kk;               // back to front
@@ -393,8 +394,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
 #else
                 let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd: not worth a shuffle
 #endif
-                let s = ProjectedSurfel(subgroupShuffle(mine_t0, k), subgroupShuffle(mine_t1, k),
-                                        subgroupShuffle(mine_t2, k), nd);
+                let s = ProjectedSurfel(subgroupShuffle(mine_p_ref, k), subgroupShuffle(mine_dp_dx, k),
+                                        subgroupShuffle(mine_dp_dy, k), nd);
                 let col = subgroupShuffle(mine_col, k);
                 let sid = subgroupShuffle(mine_id, k);
                 // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
@@ -409,16 +410,11 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                           + replay_hit(quad_alpha(s, ca, 2u), 2u, nd, col, idx, &pc, &q, &hit_c)
                           + replay_hit(quad_alpha(s, ca, 3u), 3u, nd, col, idx, &pd, &q, &hit_d);
                 if any_lane(hit_a || hit_b || hit_c || hit_d) {
-                    // d/dT of the four pixels at once. Per pixel (p = h_u x h_v): d/dh_u = h_v x v_p,
-                    // d/dh_v = v_p x h_u, and T0 -= d/dh_u, T1 -= d/dh_v, T2 += px.x d/dh_u + px.y d/dh_v.
-                    // h_u is common and h_v = h_v0 + dy T2, so the sums over the pixels need only the
-                    // sums of v_p and of dy v_p: four cross products per thread instead of two per pixel.
-                    let s_hu = cross(ca.h_v, q.v_p) + cross(s.t2.xyz, q.v_p_dy);
-                    let s_hv = cross(q.v_p, ca.h_u);
-                    let v_t2 = pa.px.x * s_hu + pa.px.y * s_hv + cross(q.v_p_dy, ca.h_u);
-                    let a = vec4<f32>(-s_hu, q.v_opacity);
-                    let b = vec4<f32>(-s_hv, q.v_mu2d.x);
-                    let c = vec4<f32>(v_t2, q.v_mu2d.y);
+                    // The ray plane's gradient over the four pixels at once: p = p_ref + d.x dp_dx +
+                    // d.y dp_dy, and the pixels share d.x and lie dy rows below the first.
+                    let a = vec4<f32>(q.v_p, q.v_opacity);
+                    let b = vec4<f32>(ca.d.x * q.v_p, q.v_mu2d.x);
+                    let c = vec4<f32>(ca.d.y * q.v_p + q.v_p_dy, q.v_mu2d.y);
 #if NORMAL_DEPTH_GRADS
                     let tail = q.v_nd;
 #else
@@ -446,13 +442,13 @@ const PROJ_VALUES: u32 = 12u + CHANNELS;   // colour gradients in the normal and
 // Projection gradient value `i` (G_* layout) from the packed subgroup totals (see main); `d` fills
 // slots 12-15 (normal and depth, or the colours when there are no normal/depth gradients).
 fn proj_component(i: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, d: vec4<f32>) -> f32 {
-    var v = a.x;                      // G_T0
+    var v = a.x;                      // G_P_REF
     v = select(v, a.y, i == 1u);
     v = select(v, a.z, i == 2u);
-    v = select(v, b.x, i == 3u);      // G_T1
+    v = select(v, b.x, i == 3u);      // G_DP_DX
     v = select(v, b.y, i == 4u);
     v = select(v, b.z, i == 5u);
-    v = select(v, c.x, i == 6u);      // G_T2
+    v = select(v, c.x, i == 6u);      // G_DP_DY
     v = select(v, c.y, i == 7u);
     v = select(v, c.z, i == 8u);
     v = select(v, b.w, i == 9u);      // G_MU2D
@@ -524,9 +520,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             }
             let s = batch_surf[j];
             // surfel_alpha() of the forward, keeping the terms the gradient needs.
-            let h_u = px.x * s.t2.xyz - s.t0.xyz;
-            let h_v = px.y * s.t2.xyz - s.t1.xyz;
-            let ae = alpha_from(s, cross(h_u, h_v), px - vec2<f32>(s.t0.w, s.t1.w));
+            let d = reference_offset(s, px);
+            let ae = alpha_from(s, ray_plane_at(s, d), d);
             let alpha = min(MAX_ALPHA, ae.raw);
             if alpha < ALPHA_THRESHOLD {
                 continue;
@@ -547,11 +542,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // Explicitly initialised: naga hoists an uninitialised `var` out of the loop without re-zeroing it.
             var g = SurfelGrad(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0, vec4<f32>(0.0));
             let ag = alpha_backward(ae, T_i * g_out - ra * behind);
-            let v_hu = cross(h_v, ag.v_p);
-            let v_hv = cross(ag.v_p, h_u);
-            g.v_t0 = -v_hu;
-            g.v_t1 = -v_hv;
-            g.v_t2 = px.x * v_hu + px.y * v_hv;
+            g.v_p_ref = ag.v_p;
+            g.v_dp_dx = d.x * ag.v_p;
+            g.v_dp_dy = d.y * ag.v_p;
             g.v_mu2d = ag.v_mu2d;
             g.v_opacity = ag.v_opacity;
             g.v_nd = w * v_nd;

@@ -143,11 +143,12 @@ struct PixelResult {
 }
 
 // Alpha of a surfel at a pixel (docs/design.md renderer contract, steps 2-3): the ray-splat intersection
-// p = h_u x h_v with h_u = px.x T2 - T0, h_v = px.y T2 - T1, and the 2D distance d as a floor. Every
+// p = h_u x h_v with h_u = px.x T2 - T0, h_v = px.y T2 - T1 (evaluated in its linear form, ray_plane_at),
+// and the 2D distance d as a floor. Every
 // rasterizer, forward and backward, evaluates alpha through alpha_from() (from p and d), so that the
 // backward replays the forward's alpha bit for bit.
 struct AlphaEval {
-    d: vec2<f32>,     // pixel centre - projected centre
+    d: vec2<f32>,     // pixel centre - reference point (the projected centre where it is near the image)
     uv: vec2<f32>,    // p.xy / p.z (meaningful when use_3d)
     inv_pz: f32,      // 1 / p.z
     e: f32,           // exp(-sigma)
@@ -168,15 +169,25 @@ fn alpha_from(s: ProjectedSurfel, p: vec3<f32>, d: vec2<f32>) -> AlphaEval {
     let sigma_3d = 0.5 * dot(a.uv, a.uv);
     a.use_3d = p.z != 0.0 && sigma_3d <= sigma_2d;   // min(sigma_2d, sigma_3d), NaN-safe
     a.e = exp(-select(sigma_2d, sigma_3d, a.use_3d));
-    a.raw = s.t2.w * a.e;
+    a.raw = s.dp_dy.w * a.e;   // opacity
     return a;
+}
+
+// The offset of pixel centre px from surfel s's reference point c (ray_plane.wgsl): the 2D distance of
+// the alpha floor, and the step from p(c) to p(px).
+fn reference_offset(s: ProjectedSurfel, px: vec2<f32>) -> vec2<f32> {
+    return px - vec2<f32>(s.p_ref.w, s.dp_dx.w);
+}
+
+// The ray-splat intersection p at the pixel `d` away from the reference point (ProjectedSurfel).
+fn ray_plane_at(s: ProjectedSurfel, d: vec2<f32>) -> vec3<f32> {
+    return s.p_ref.xyz + d.x * s.dp_dx.xyz + d.y * s.dp_dy.xyz;
 }
 
 // Alpha of surfel s at pixel centre px (the plain path: one pixel per thread).
 fn surfel_alpha(s: ProjectedSurfel, px: vec2<f32>) -> f32 {
-    let h_u = px.x * s.t2.xyz - s.t0.xyz;
-    let h_v = px.y * s.t2.xyz - s.t1.xyz;
-    return min(MAX_ALPHA, alpha_from(s, cross(h_u, h_v), px - vec2<f32>(s.t0.w, s.t1.w)).raw);
+    let d = reference_offset(s, px);
+    return min(MAX_ALPHA, alpha_from(s, ray_plane_at(s, d), d).raw);
 }
 
 #if !USE_SUBGROUPS
@@ -358,27 +369,19 @@ fn start_blend(pix: vec2<u32>) -> PixelBlend {
     return b;
 }
 
-// The terms of a surfel's alpha that a thread's four pixels share, at its first pixel `px`. The pixels
-// lie in one column, so h_u is common and h_v grows by dy T2 from row to row: p = h_u x h_v at the
-// pixel dy rows down is p + dy (h_u x T2). Two cross products per surfel and thread, then three FMAs per
-// pixel, instead of two half vectors and a cross product per pixel. (With the backward's matching
-// change, standard scene, 100k surfels, lavapipe, same run: forward rasterize -2 %, backward -20 %.)
+// The terms of a surfel's alpha that a thread's four pixels share, at its first pixel `px`: p and the
+// offset d there. The pixels lie in one column, so p at the pixel dy rows down is p + dy dp_dy. (Against
+// two cross products per pixel, with the backward's matching change, standard scene, 100k surfels,
+// lavapipe, same run: forward rasterize -2 %, backward -20 %; p from its linear form instead of
+// (px.x T2 - T0) x (px.y T2 - T1) per surfel and thread: see ray_plane.wgsl and docs/design.md.)
 struct ColumnAlpha {
-    h_u: vec3<f32>,
-    h_v: vec3<f32>,    // at the first pixel
     p: vec3<f32>,      // at the first pixel
-    dp_dy: vec3<f32>,  // h_u x T2
     d: vec2<f32>,      // at the first pixel
 }
 
 fn column_alpha(s: ProjectedSurfel, px: vec2<f32>) -> ColumnAlpha {
-    var c: ColumnAlpha;
-    c.h_u = px.x * s.t2.xyz - s.t0.xyz;
-    c.h_v = px.y * s.t2.xyz - s.t1.xyz;
-    c.p = cross(c.h_u, c.h_v);
-    c.dp_dy = cross(c.h_u, s.t2.xyz);
-    c.d = px - vec2<f32>(s.t0.w, s.t1.w);
-    return c;
+    let d = reference_offset(s, px);
+    return ColumnAlpha(ray_plane_at(s, d), d);
 }
 
 // Alpha terms of the thread's pixel `k` (0-3: k ROW_STEPs below the first), forward and backward alike.
@@ -390,7 +393,7 @@ fn quad_alpha(s: ProjectedSurfel, c: ColumnAlpha, k: u32) -> AlphaEval {
         return alpha_from(s, c.p, c.d);
     }
     let step = f32(ROW_STEP.y);
-    let dp = step * c.dp_dy;   // exact (a power of two): the same for every k, so computed once
+    let dp = step * s.dp_dy.xyz;   // exact (a power of two): the same for every k, so computed once
     var p = c.p + dp;
     var d = c.d + vec2<f32>(0.0, step);
     if k >= 2u {   // constant after inlining; p and d of pixel k - 1 are common subexpressions
@@ -448,8 +451,8 @@ struct ShuffledHit {
 
 fn shuffle_hit(mine: ProjectedSurfel, mine_col: vec4<f32>, k: u32) -> ShuffledHit {
     var h: ShuffledHit;
-    h.s = ProjectedSurfel(subgroupShuffle(mine.t0, k), subgroupShuffle(mine.t1, k),
-                          subgroupShuffle(mine.t2, k), vec4<f32>(0.0));
+    h.s = ProjectedSurfel(subgroupShuffle(mine.p_ref, k), subgroupShuffle(mine.dp_dx, k),
+                          subgroupShuffle(mine.dp_dy, k), vec4<f32>(0.0));
     h.normal = subgroupShuffle(mine.normal_depth.xyz, k);
     h.depth = 0.0;
     if !DEPTH_IN_COLOR {   // constant

@@ -5,10 +5,10 @@
 // once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers.
 //
 // Define WALK_LAYOUT (SurfelRasterizer.use_walk_layout, on with the tile walks): projection wrote the walks'
-// layout (project_fwd.wgsl): a surfel's 64 bytes of `projected` hold its T rows (t0, t1, t2) and its colour
+// layout (project_fwd.wgsl): a surfel's 64 bytes of `projected` hold its ray plane (p_ref, dp_dx, dp_dy) and its colour
 // vec4 (channels 0-3, the depth in .w below 4 channels), and colors4 holds its normal and depth. The
 // backward walk reads only the first: one cache line per surfel instead of two (the standard layout has
-// the normal and depth beside the T rows and the colour in colors4). Standard scene, both in one process
+// the normal and depth beside the ray plane and the colour in colors4). Standard scene, both in one process
 // (shader_ab.py, 14 rounds, twice): backward rasterize 0.920x and 0.898x with the colour read from the T
 // rows' line (timing only). Textures (texel_at): surfel i's four vec4s of `projected` are texels 4 i + 0..3
 // of one, its colors4 vec4 texel i of the other.
@@ -17,7 +17,7 @@
 @group(0) @binding(20) var projected_texels: texture_storage_2d<rgba32float, read>;
 @group(0) @binding(21) var color_texels: texture_storage_2d<rgba32float, read>;   // colors4's copy
 
-// Row k of surfel sid's projection (0-2: T rows; 3: see the layout above).
+// Row k of surfel sid's projection (0-2: p_ref, dp_dx, dp_dy; 3: see the layout above).
 fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {
     return textureLoad(projected_texels, texel_at(4u * sid + k));
 }
@@ -28,9 +28,9 @@ fn load_colors4_vec(sid: u32) -> vec4<f32> {
 #else
 fn load_projected_row(sid: u32, k: u32) -> vec4<f32> {
     switch k {   // k is a constant at every call: the switch folds away
-        case 0u: { return projected[sid].t0; }
-        case 1u: { return projected[sid].t1; }
-        case 2u: { return projected[sid].t2; }
+        case 0u: { return projected[sid].p_ref; }
+        case 1u: { return projected[sid].dp_dx; }
+        case 2u: { return projected[sid].dp_dy; }
         default: { return projected[sid].normal_depth; }
     }
 }

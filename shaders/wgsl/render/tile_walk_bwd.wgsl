@@ -46,14 +46,16 @@ struct BlockReplay {
     d: PixelReplay,
 }
 
-// A hit's gradient over the lane's pixels of every block it reached, with the ray transform's part still
-// as d/dp: the T rows' gradients are linear in p's gradient and its sums weighted by the pixels' column
-// and row, so they are formed once per hit (store_record) instead of once per block. (Standard scene,
-// shader_ab.py, 16 and 24 rounds: this pass 0.956x and 0.961x against forming them per block.)
+// A hit's gradient over the lane's pixels of every block it reached. p = p_ref + d.x dp_dx + d.y dp_dy
+// (ProjectedSurfel), so the ray plane's gradients are the sums of d loss / dp, unweighted and weighted by
+// the pixels' offsets d from the reference point: the record takes them as they are, and project_bwd
+// turns their sums over a surfel's records into d loss / dT once per surfel. (Forming d loss / dT per hit
+// from sums weighted by px took six cross products per hit; per block before that: this pass 0.956x
+// and 0.961x for per hit, shader_ab.py, 16 and 24 rounds.)
 struct HitTotals {
-    v_p: vec3<f32>,      // sum of d loss / dp over the lane's pixels of the blocks
-    v_p_x: vec3<f32>,    // the same, each pixel's weighted by its column px.x
-    v_p_y: vec3<f32>,    // ... and by its row px.y
+    v_p: vec3<f32>,      // sum of d loss / dp over the lane's pixels of the blocks: d loss / dp_ref
+    v_p_x: vec3<f32>,    // the same, each pixel's weighted by its offset d.x: d loss / ddp_dx
+    v_p_y: vec3<f32>,    // ... and by its d.y: d loss / ddp_dy
     v_mu2d: vec2<f32>,
     v_opacity: f32,
     nd: vec4<f32>,
@@ -99,26 +101,21 @@ fn replay_block(s: ProjectedSurfel, nd: vec4<f32>, col: vec4<f32>, idx: u32, r: 
     (*r).c = pc;
     (*r).d = pd;
     (*t).v_p += q.v_p;
-    (*t).v_p_x += pa.px.x * q.v_p;
-    (*t).v_p_y += pa.px.y * q.v_p + q.v_p_dy;
+    (*t).v_p_x += ca.d.x * q.v_p;
+    (*t).v_p_y += ca.d.y * q.v_p + q.v_p_dy;
     (*t).v_mu2d += q.v_mu2d;
     (*t).v_opacity += q.v_opacity;
     (*t).nd += q.v_nd;
     (*t).e += g_col;
 }
 
-// Write a hit's totals (surfel `s`) to record `rec` (its tile-sorted place): lane l stores V[l] and V[l + 8] (as
-// flush_scattered8 adds them), totals over the lanes of the packed values a, b, c (T rows, opacity,
-// centre) and the tail.
-fn store_record(rec: u32, s: ProjectedSurfel, t: HitTotals, sg_lane: u32) {
-    // Per pixel p = h_u x h_v with h_u = px.x T2 - T0, h_v = px.y T2 - T1: d/dT0 = -(h_v x v_p),
-    // d/dT1 = -(v_p x h_u), d/dT2 = px.x (h_v x v_p) + px.y (v_p x h_u), whose px.x px.y terms cancel.
-    let s_hu = cross(s.t2.xyz, t.v_p_y) - cross(s.t1.xyz, t.v_p);
-    let s_hv = cross(t.v_p_x, s.t2.xyz) - cross(t.v_p, s.t0.xyz);
-    let v_t2 = -cross(s.t1.xyz, t.v_p_x) - cross(t.v_p_y, s.t0.xyz);
-    let a = vec4<f32>(-s_hu, t.v_opacity);
-    let b = vec4<f32>(-s_hv, t.v_mu2d.x);
-    let c = vec4<f32>(v_t2, t.v_mu2d.y);
+// Write a hit's totals to record `rec` (its tile-sorted place): lane l stores V[l] and V[l + 8] (as
+// flush_scattered8 adds them), totals over the lanes of the packed values a, b, c (the ray plane,
+// opacity, reference point) and the tail.
+fn store_record(rec: u32, t: HitTotals, sg_lane: u32) {
+    let a = vec4<f32>(t.v_p, t.v_opacity);
+    let b = vec4<f32>(t.v_p_x, t.v_mu2d.x);
+    let c = vec4<f32>(t.v_p_y, t.v_mu2d.y);
 #if NORMAL_DEPTH_GRADS
     let tail = t.nd;
 #else
@@ -187,9 +184,9 @@ fn walk(tile: u32, sg_lane: u32) {
         record_slots[record_base[mine_sid] + (isect_keys[mine_at] >> RECORD_KEY_SHIFT)] =
             select(0u, mine_at + 1u, mine_used != 0u);
         // Field by field, the normal and depth only when their gradients are wanted (see main).
-        let mine_t0 = load_projected_row(mine_sid, 0u);
-        let mine_t1 = load_projected_row(mine_sid, 1u);
-        let mine_t2 = load_projected_row(mine_sid, 2u);
+        let mine_p_ref = load_projected_row(mine_sid, 0u);
+        let mine_dp_dx = load_projected_row(mine_sid, 1u);
+        let mine_dp_dy = load_projected_row(mine_sid, 2u);
         let mine_col = load_color4(mine_sid);
 #if NORMAL_DEPTH_GRADS
         let mine_nd = load_normal_depth(mine_sid);
@@ -206,8 +203,8 @@ fn walk(tile: u32, sg_lane: u32) {
 #else
                 let nd = vec4<f32>(0.0);  // only ever multiplied by the zero v_nd
 #endif
-                let s = ProjectedSurfel(subgroupShuffle(mine_t0, k), subgroupShuffle(mine_t1, k),
-                                        subgroupShuffle(mine_t2, k), nd);
+                let s = ProjectedSurfel(subgroupShuffle(mine_p_ref, k), subgroupShuffle(mine_dp_dx, k),
+                                        subgroupShuffle(mine_dp_dy, k), nd);
                 let col = subgroupShuffle(mine_col, k);
                 var t = HitTotals(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec2<f32>(0.0), 0.0,
                                   vec4<f32>(0.0), vec4<f32>(0.0));
@@ -219,7 +216,7 @@ fn walk(tile: u32, sg_lane: u32) {
                 if (blocks & 32u) != 0u { replay_block(s, nd, col, idx, &r5, &t); }
                 if (blocks & 64u) != 0u { replay_block(s, nd, col, idx, &r6, &t); }
                 if (blocks & 128u) != 0u { replay_block(s, nd, col, idx, &r7, &t); }
-                store_record(range.x + idx, s, t, sg_lane);
+                store_record(range.x + idx, t, sg_lane);
             }
         }
     }
