@@ -17,10 +17,11 @@ import gc
 import numpy as np
 import pytest
 import torch
-from render_helpers import default_camera, special_surfels, torch_scene
+from render_helpers import assert_image_close, default_camera, special_surfels, torch_scene
 
 from gma.render import SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference, read_outputs
 from gma.render.gpu_sort import LANE_MAX_DIGIT_BITS
+from gma.render.reference import project_reference
 
 pytestmark = pytest.mark.gpu
 NAMES = ("means", "quats", "scales", "opacities", "colors")
@@ -287,6 +288,44 @@ def test_edge_cases_and_heavy_overlap(gpu):
     dense = torch_scene(1500, seed=12, spread=0.3, scale_range=(0.05, 0.3))
     up = random_upstream(cam, seed=4)
     assert_grads_close(gpu_grads(gpu, dense, cam, up), reference_grads(dense, cam, up))
+
+
+def far_centred_surfels() -> dict[str, torch.Tensor]:
+    """Large tilted surfels whose circle almost reaches the camera plane: each covers most of a 40x30 image
+    while the centre of its image conic lies hundreds to ~10^5 pixels away (checked below)."""
+    tilts, sizes = np.radians([60.0, 88.0, 80.0, 88.0]), [2.3, 2.0, 2.05, 2.0012]
+    quats = np.array([[np.cos(a / 2), 0.0, np.sin(a / 2), 0.0] for a in tilts], np.float32)
+    rng = np.random.default_rng(8)
+    scene = {"means": np.array([[0.1, 0.05, 2.0], [0.05, 0.0, 2.0], [-0.05, 0.1, 2.0], [0.0, -0.1, 2.0]], np.float32),
+             "quats": quats, "scales": np.array([[s, s] for s in sizes], np.float32),
+             "opacities": np.array([0.5, 0.4, 0.6, 0.3], np.float32),
+             "colors": rng.uniform(0, 1, (4, 3)).astype(np.float32)}
+    return {k: torch.from_numpy(v) for k, v in scene.items()}
+
+
+@pytest.mark.parametrize("subgroups", [True, False])
+def test_surfels_whose_conic_centre_lies_far_outside_the_image(gpu, subgroups):
+    """The rasterizers evaluate each surfel's ray-splat intersection about a reference point: the projected
+    centre clamped near the image (render/ray_plane.wgsl). About a centre thousands of pixels away the
+    linear form would cancel large terms; images and gradients must still match the float64 reference."""
+    scene = far_centred_surfels()
+    cam = default_camera(40, 30)
+    t = [scene[k].double() for k in NAMES]
+    view, K = torch.from_numpy(cam.viewmat).double(), torch.from_numpy(cam.K).double()
+    _, mu2d, _, _, valid = project_reference(*t[:4], view, K)
+    far = (mu2d[:, 0] < -100) | (mu2d[:, 0] > cam.width + 100)
+    assert bool(valid.all()) and int(far.sum()) == 4 and float(mu2d.abs().max()) > 5e4, mu2d
+    ref = rasterize_reference(*t, view, K, cam.width, cam.height)
+    assert float((ref["alpha"] > 0.1).double().mean()) > 0.5   # the surfels cover the image
+    rast = SurfelRasterizer(gpu)
+    rast.use_subgroups = subgroups and rast.use_subgroups
+    buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+    out = read_outputs(gpu, rast.forward(buffers, cam))
+    assert_image_close("color", out.color, ref["color"].numpy())
+    assert_image_close("alpha", out.alpha, ref["alpha"].numpy())
+    up = random_upstream(cam, seed=11)
+    got = gpu_grads(gpu, scene, cam, up, subgroups=subgroups)
+    assert_grads_close(got, reference_grads(scene, cam, up))
 
 
 @pytest.mark.parametrize("subgroups", [True, False])
