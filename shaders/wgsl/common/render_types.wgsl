@@ -45,7 +45,7 @@ struct RenderParams {
 // at p(x) = (x T2 - T0) x (y T2 - T1), whose (u, v) = p.xy / p.z (docs/design.md, renderer contract).
 // The y T2 x x T2 term vanishes, so p is linear in the pixel: p(x) = p(c) + (x - c.x) dp_dx + (y - c.y) dp_dy
 // with dp_dx = T1 x T2 and dp_dy = T2 x T0. Projection stores that form about a reference point c, the
-// projected centre clamped to the image's surroundings (ray_plane_reference in project_fwd.wgsl), so that
+// projected centre clamped to the image's surroundings (ray_plane_reference in render/ray_plane.wgsl), so that
 // a rasterizer evaluates p with two multiply-adds per component instead of two cross products, and the
 // backward's d loss / dp sums need no cross products per hit (project_bwd.wgsl turns them into d loss / dT
 // once per surfel). The reference point is also the centre of the 2D-distance floor: see there.

@@ -229,19 +229,19 @@ fn project_surfel(i: u32) -> vec2<u32> {
                            select(0.0, colors[i * nc + min(2u, last)], nc > 2u),
                            select(mu_c.z, colors[i * nc + min(3u, last)], nc > 3u));
     let normal_depth = vec4<f32>(normal, mu_c.z);
-    let c = ray_plane_reference(mu2d, params.image_size);
-    let plane = ray_plane(t0, t1, t2, c);
-    let rows = ProjectedSurfel(vec4<f32>(plane.p_ref, c.x), vec4<f32>(plane.dp_dx, c.y),
-                               vec4<f32>(plane.dp_dy, opacity), vec4<f32>(0.0));
 #if WALK_LAYOUT
     // The tile walks' layout (surfel_texels.wgsl): the colour in the fourth vec4, beside the ray plane in
     // the surfel's 64 bytes, which the backward walk reads alone; the normal and depth in colors4.
-    projected[i] = ProjectedSurfel(rows.p_ref, rows.dp_dx, rows.dp_dy, color4);
+    let fourth = color4;
     colors4[i] = normal_depth;
 #else
-    projected[i] = ProjectedSurfel(rows.p_ref, rows.dp_dx, rows.dp_dy, normal_depth);
+    let fourth = normal_depth;
     colors4[i] = color4;
 #endif
+    let c = ray_plane_reference(mu2d, params.image_size);
+    let plane = ray_plane(t0, t1, t2, c);
+    projected[i] = ProjectedSurfel(vec4<f32>(plane.p_ref, c.x), vec4<f32>(plane.dp_dx, c.y),
+                                   vec4<f32>(plane.dp_dy, opacity), fourth);
     let count = select(countOneBits(tiles.z), extent.x * extent.y, tiles.w != 0u);
     tile_counts[i] = count;
     let key = depth_key(mu_c.z);

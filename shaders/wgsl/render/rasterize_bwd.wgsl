@@ -160,6 +160,13 @@ struct QuadGrad {
     v_nd: vec4<f32>,
 }
 
+// The ray plane's gradient (d loss / d(p_ref, dp_dx, dp_dy)) of a thread's four pixels from their sums `q`:
+// p = p_ref + d.x dp_dx + d.y dp_dy, the pixels share d.x (`d`: the first pixel's offset from the
+// reference point) and lie dy rows below the first.
+fn quad_plane_grad(q: QuadGrad, d: vec2<f32>) -> RayPlane {
+    return RayPlane(q.v_p, d.x * q.v_p, d.y * q.v_p + q.v_p_dy);
+}
+
 // Step pixel `r` (the thread's pixel k, 0-3) back over a surfel with alpha terms `ae`, normal and depth
 // `nd`, colour `col`, local intersection index `idx`: adds the pixel's gradient to `q` and returns its
 // colour gradient; `hit` says whether the surfel contributed.
@@ -410,11 +417,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                           + replay_hit(quad_alpha(s, ca, 2u), 2u, nd, col, idx, &pc, &q, &hit_c)
                           + replay_hit(quad_alpha(s, ca, 3u), 3u, nd, col, idx, &pd, &q, &hit_d);
                 if any_lane(hit_a || hit_b || hit_c || hit_d) {
-                    // The ray plane's gradient over the four pixels at once: p = p_ref + d.x dp_dx +
-                    // d.y dp_dy, and the pixels share d.x and lie dy rows below the first.
-                    let a = vec4<f32>(q.v_p, q.v_opacity);
-                    let b = vec4<f32>(ca.d.x * q.v_p, q.v_mu2d.x);
-                    let c = vec4<f32>(ca.d.y * q.v_p + q.v_p_dy, q.v_mu2d.y);
+                    let pg = quad_plane_grad(q, ca.d);   // over the four pixels at once
+                    let a = vec4<f32>(pg.p_ref, q.v_opacity);
+                    let b = vec4<f32>(pg.dp_dx, q.v_mu2d.x);
+                    let c = vec4<f32>(pg.dp_dy, q.v_mu2d.y);
 #if NORMAL_DEPTH_GRADS
                     let tail = q.v_nd;
 #else

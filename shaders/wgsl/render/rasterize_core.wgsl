@@ -6,6 +6,7 @@
 #include "common/render_types.wgsl"
 #include "common/math.wgsl"
 #include "render/block_bits.wgsl"
+#include "render/ray_plane.wgsl"
 
 @group(0) @binding(0) var<uniform> params: RenderParams;
 @group(0) @binding(1) var<storage, read> projected: array<ProjectedSurfel>;   // [N]
@@ -171,17 +172,6 @@ fn alpha_from(s: ProjectedSurfel, p: vec3<f32>, d: vec2<f32>) -> AlphaEval {
     a.e = exp(-select(sigma_2d, sigma_3d, a.use_3d));
     a.raw = s.dp_dy.w * a.e;   // opacity
     return a;
-}
-
-// The offset of pixel centre px from surfel s's reference point c (ray_plane.wgsl): the 2D distance of
-// the alpha floor, and the step from p(c) to p(px).
-fn reference_offset(s: ProjectedSurfel, px: vec2<f32>) -> vec2<f32> {
-    return px - vec2<f32>(s.p_ref.w, s.dp_dx.w);
-}
-
-// The ray-splat intersection p at the pixel `d` away from the reference point (ProjectedSurfel).
-fn ray_plane_at(s: ProjectedSurfel, d: vec2<f32>) -> vec3<f32> {
-    return s.p_ref.xyz + d.x * s.dp_dx.xyz + d.y * s.dp_dy.xyz;
 }
 
 // Alpha of surfel s at pixel centre px (the plain path: one pixel per thread).

@@ -1,8 +1,9 @@
 // The ray-splat intersection in the form the rasterizers evaluate (ProjectedSurfel in
 // common/render_types.wgsl): p(x) = p(c) + (x - c.x) dp_dx + (y - c.y) dp_dy, where
 // p(x) = (x T2 - T0) x (y T2 - T1) for the ray transform's rows T0, T1, T2. Projection writes it
-// (project_fwd.wgsl) and projection backward turns the rasterizers' gradients with respect to it into
-// gradients with respect to T (project_bwd.wgsl); both compute the reference point c the same way.
+// (project_fwd.wgsl), the rasterizers evaluate it (ray_plane_at, through rasterize_core.wgsl), and
+// projection backward turns their gradients with respect to it into gradients with respect to T
+// (project_bwd.wgsl); both projections compute the reference point c the same way.
 //
 // Why a reference point: p(c) is formed from the rows shifted to c (T0 - c.x T2, T1 - c.y T2), whose
 // sizes are the surfel's own, and the pixel offsets x - c stay small near the surfel, so that rounding
@@ -38,6 +39,17 @@ fn ray_plane(t0: vec3<f32>, t1: vec3<f32>, t2: vec3<f32>, c: vec2<f32>) -> RayPl
     let t0c = t0 - c.x * t2;
     let t1c = t1 - c.y * t2;
     return RayPlane(cross(t0c, t1c), cross(t1c, t2), cross(t2, t0c));
+}
+
+// The offset of pixel centre px from surfel s's reference point c (the rasterizers): the 2D distance of
+// the alpha floor, and the step from p(c) to p(px).
+fn reference_offset(s: ProjectedSurfel, px: vec2<f32>) -> vec2<f32> {
+    return px - vec2<f32>(s.p_ref.w, s.dp_dx.w);
+}
+
+// The ray-splat intersection p at the pixel `d` away from surfel s's reference point.
+fn ray_plane_at(s: ProjectedSurfel, d: vec2<f32>) -> vec3<f32> {
+    return s.p_ref.xyz + d.x * s.dp_dx.xyz + d.y * s.dp_dy.xyz;
 }
 
 // d loss / dT rows from d loss / d(p(c), dp_dx, dp_dy) (`g`), c held fixed: p(x) does not depend on c,

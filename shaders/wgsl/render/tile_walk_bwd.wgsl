@@ -100,9 +100,10 @@ fn replay_block(s: ProjectedSurfel, nd: vec4<f32>, col: vec4<f32>, idx: u32, r: 
     (*r).b = pb;
     (*r).c = pc;
     (*r).d = pd;
-    (*t).v_p += q.v_p;
-    (*t).v_p_x += ca.d.x * q.v_p;
-    (*t).v_p_y += ca.d.y * q.v_p + q.v_p_dy;
+    let pg = quad_plane_grad(q, ca.d);
+    (*t).v_p += pg.p_ref;
+    (*t).v_p_x += pg.dp_dx;
+    (*t).v_p_y += pg.dp_dy;
     (*t).v_mu2d += q.v_mu2d;
     (*t).v_opacity += q.v_opacity;
     (*t).nd += q.v_nd;
