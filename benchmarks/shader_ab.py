@@ -14,12 +14,20 @@ checkout's shaders both times and a ``SurfelRasterizer`` switch off (A) and on (
 ``python benchmarks/shader_ab.py --toggle use_work_queues --scene avatar``. Without ../shared's standard scene
 it renders a random scene of --count surfels. ``--scene avatar`` renders avatar-like surfels instead (small, tangent to
 a body-shaped surface; gma.render.scenes) at --size pixels square.
+
+``--public`` times whole steps of the public call instead (``gma.render.rasterize``, the mean colour's
+backward, as ``peer_compare.py`` times them), alternating the directories' pipelines under the context's
+one rasterizer, two timed steps per directory and round after an untimed one; prints the medians, the
+median of the per-step ratios B / A, and the means' gradient sums. Its resolution on the 2-core VM
+(2026-12-03): the same shaders read 1.00x and 0.98x (12 and 40 rounds), so it shows changes of the whole
+step above a few percent; the pass times above resolve smaller ones.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +50,7 @@ def main() -> int:
     p.add_argument("--count", type=int, default=100000, help="surfels of the scene")
     p.add_argument("--scene", choices=("standard", "avatar"), default="standard")
     p.add_argument("--size", type=int, default=512, help="image side of the avatar scene")
+    p.add_argument("--public", action="store_true", help="time public forward+backward steps (directories only)")
     args = p.parse_args()
     if args.rounds < 1:
         print(f"--rounds {args.rounds}: needs at least 1", file=sys.stderr)
@@ -57,6 +66,9 @@ def main() -> int:
     if not ((args.toggle is None and two_dirs) or (args.toggle is not None and no_dirs)):
         print("give two shader directories, or --toggle ATTR without them", file=sys.stderr)
         return 2
+    if args.public and args.toggle:
+        print("--public compares two shader directories, not a --toggle", file=sys.stderr)
+        return 2
     dirs = [shader_root()] * 2 if args.toggle else [Path(args.a), Path(args.b)]
     if args.toggle and not isinstance(getattr(SurfelRasterizer(get_context()), args.toggle, None), bool):
         print(f"--toggle {args.toggle}: not a switch of SurfelRasterizer", file=sys.stderr)
@@ -68,6 +80,8 @@ def main() -> int:
     ctx = get_context()
     print(f"adapter: {ctx.name}; {machine()}")
     scene, cam = scene_and_camera(args.count, args.scene, args.size)
+    if args.public:
+        return public_steps(ctx, [(ShaderLibrary(d), {}) for d in dirs], scene, cam, args.rounds)
     surfels, upstream = pass_inputs(ctx, scene, cam)
     # Each directory gets its own shader library and pipeline cache; the context switches between them.
     setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx)) for d in dirs]
@@ -96,6 +110,42 @@ def main() -> int:
         if a.size and a.min() > 0:
             print(f"{name:14s} {np.median(a):8.2f} {np.median(b):8.2f} {np.median(b / a):7.3f}")
     print(f"sums (colour, |d means|, |d colours|): A {sums[0]}\n{'':38s}B {sums[1]}")
+    return 0
+
+
+def public_steps(ctx, setups, scene: dict, cam, rounds: int) -> int:
+    """``--public``: forward+backward steps of the public call, the directories' pipelines alternating."""
+    import torch
+
+    from gma.render import rasterize
+
+    tensors = {k: torch.from_numpy(np.ascontiguousarray(scene[k]))
+               for k in ("means", "quats", "scales", "opacities", "colors")}
+    viewmat, K = torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K)
+
+    def step() -> float:
+        params = [t.clone().requires_grad_(True) for t in tensors.values()]
+        rasterize(*params, viewmat, K, cam.width, cam.height, ctx=ctx).color.mean().backward()
+        return float(params[0].grad.abs().sum())
+
+    times: list[list[float]] = [[], []]
+    sums = [0.0, 0.0]
+    for r in range(rounds):
+        for i in (0, 1) if r % 2 == 0 else (1, 0):
+            ctx.shaders, ctx._pipelines = setups[i]
+            step()   # the first step after a switch waits for the other side's buffers to settle
+            for _ in range(2):
+                start = time.perf_counter()
+                sums[i] = step()
+                if r >= 1:
+                    times[i].append((time.perf_counter() - start) * 1e3)
+    a, b = np.array(times[0]), np.array(times[1])
+    if not a.size:
+        print("--public needs at least 2 rounds", file=sys.stderr)
+        return 2
+    print(f"public forward+backward: A {np.median(a):.1f} ms, B {np.median(b):.1f} ms, median of per-step "
+          f"ratios B / A {np.median(b / a):.3f} ({a.size} steps each)")
+    print(f"|d means| sums: A {sums[0]}, B {sums[1]}")
     return 0
 
 
