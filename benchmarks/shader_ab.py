@@ -69,6 +69,9 @@ def main() -> int:
     if args.public and args.toggle:
         print("--public compares two shader directories, not a --toggle", file=sys.stderr)
         return 2
+    if args.public and args.rounds < 2:   # the first round only warms up
+        print(f"--rounds {args.rounds}: --public needs at least 2", file=sys.stderr)
+        return 2
     dirs = [shader_root()] * 2 if args.toggle else [Path(args.a), Path(args.b)]
     if args.toggle and not isinstance(getattr(SurfelRasterizer(get_context()), args.toggle, None), bool):
         print(f"--toggle {args.toggle}: not a switch of SurfelRasterizer", file=sys.stderr)
@@ -140,9 +143,6 @@ def public_steps(ctx, setups, scene: dict, cam, rounds: int) -> int:
                 if r >= 1:
                     times[i].append((time.perf_counter() - start) * 1e3)
     a, b = np.array(times[0]), np.array(times[1])
-    if not a.size:
-        print("--public needs at least 2 rounds", file=sys.stderr)
-        return 2
     print(f"public forward+backward: A {np.median(a):.1f} ms, B {np.median(b):.1f} ms, median of per-step "
           f"ratios B / A {np.median(b / a):.3f} ({a.size} steps each)")
     print(f"|d means| sums: A {sums[0]}, B {sums[1]}")
