@@ -28,6 +28,7 @@ SMOKE: dict[str, list[str] | str] = {
     "render_backward.py": ["--repeats", "1", "--counts", "500", "--standard-counts", "500",
                            "--reference-count", "300", "--reference-size", "32"],
     "peer_compare.py": ["--repeats", "1", "--counts", "500"],
+    "first_call.py": ["--count", "500", "--pause", "0.05", "--repeats", "1"],
     "shader_ab.py": ["{repo}/shaders/wgsl", "{repo}/shaders/wgsl", "--rounds", "2", "--count", "500"],
     "lavapipe_profile.py": ["--seconds", "2", "--count", "500", "--frequency", "499"],
     "dispatch_split.py": ["--workgroups", "64", "--heavy", "100", "--repeats", "1", "--count", "500",
