@@ -15,17 +15,9 @@ region of torch's pool (``GOMP_parallel_start``, libgomp's ABI for compiler-made
 block in ``sem_wait``, asleep in the kernel, while the calling thread goes on as the region's master;
 on leaving, it posts the semaphore once per worker, waits (asleep) until they have taken the posts, and
 closes the region (``GOMP_parallel_end``). The
-workers then return to the pool. In between, torch ops on the calling thread run on one thread (torch sees
-a parallel region), so the region covers only GMA's own code, which keeps its host work in numpy.
-
-A side effect, measured (2-core VM, 2026-12-03) and not explained: from the first such region on, libgomp's
-workers spin much less after each torch op, for the rest of the process (their CPU time, from
-/proc/self/task/*/schedstat, in the 50 ms after a small ``clone()``: 0.6 ms against 3.9 ms before the first
-region). A bare ``GOMP_parallel`` of a no-op called through ctypes does the same, so it is libgomp's doing,
-not this module's semaphore; where in libgomp was not found. A loop's steps lose nothing by it (the fit's
-training step 140.6 ms against 146.5 ms with ``spin``, ``benchmarks/fit_step.py``), but after the cores have
-idled, each of the first torch ops waits for its worker to wake: the five small ``clone()`` calls of a
-render step after a 0.5 s pause took 13-23 ms against 2.2 ms with ``spin`` (``benchmarks/first_call.py``).
+workers then return to the pool exactly as after any torch op (and spin, now beside the caller's own
+work). In between, torch ops on the calling thread run on one thread (torch sees a parallel region), so
+the region covers only GMA's own code, which keeps its host work in numpy.
 
 It does nothing unless all of these hold: Linux, torch's parallel backend is OpenMP with libgomp
 already loaded, torch uses more than one thread, the caller is the main thread (each thread that runs
