@@ -15,7 +15,7 @@ parallel op wakes its OpenMP worker), the forward 44.4 against 39.4, the backwar
 ``OMP_NUM_THREADS=1`` (torch on one thread) the first step after a sleep took 81.5 and 80.8 against
 78.7 and 79.1 ms. ``GMA_OPENMP_WORKERS=spin`` changed nothing that these runs resolve (first step after a
 sleep 102.2 and 98.1 ms, its clones 16.7 and 17.7 ms; the default in the runs between 95.4 and 112.2, 12.5
-and 15.8 ms): the wait is torch's, on a VM whose idle cores wake slowly, not GMA's sleeping workers'.
+and 15.8 ms): the wait is torch's (its worker waking, presumably on an idle virtual core), not GMA's sleeping workers'.
 
     python benchmarks/first_call.py [--count 100000] [--pause 0.5] [--repeats 6]
 """
