@@ -71,6 +71,18 @@ def load_standard_workload():
     return module
 
 
+def scene_tensors(workload, n: int) -> dict:
+    """The standard scene of ``n`` surfels as torch tensors, as peer_compare.py and first_call.py time it:
+    ``scales`` GMA's two per surfel, ``scales3`` the peer's 2DGS layout (third scale 0)."""
+    import torch
+
+    w = workload.make_workload(n)
+    t = {k: torch.from_numpy(w[k]) for k in ("means", "quats", "opacities", "colors", "viewmat", "K")}
+    t["scales3"] = torch.from_numpy(w["scales_2d"])
+    t["scales"] = t["scales3"][:, :2].contiguous()
+    return t
+
+
 def add_scene_args(ap, reference_count: int, reference_size: int) -> None:
     """The renderer benchmarks' options for the standard scene's sizes and the torch reference comparison
     (render.py, render_backward.py; the smoke tests make them tiny)."""

@@ -32,8 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, load_standard_workload, machine  # noqa: E402
-from peer_compare import scene_tensors  # noqa: E402
+from common import SHARED_WORKLOAD, load_standard_workload, machine, scene_tensors  # noqa: E402
 
 from gma.core.args import positive_float, positive_int  # noqa: E402
 from gma.gpu import get_context  # noqa: E402

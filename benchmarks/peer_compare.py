@@ -36,7 +36,15 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, CheckoutWorker, load_standard_workload, machine, parse_env, wrong_checkout  # noqa: E402
+from common import (  # noqa: E402
+    SHARED_WORKLOAD,
+    CheckoutWorker,
+    load_standard_workload,
+    machine,
+    parse_env,
+    scene_tensors,
+    wrong_checkout,
+)
 
 from gma.gpu import get_context  # noqa: E402
 from gma.render import rasterize  # noqa: E402
@@ -58,14 +66,6 @@ def load_peer():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module.render
-
-
-def scene_tensors(workload, n: int) -> dict:
-    w = workload.make_workload(n)
-    t = {k: torch.from_numpy(w[k]) for k in ("means", "quats", "opacities", "colors", "viewmat", "K")}
-    t["scales3"] = torch.from_numpy(w["scales_2d"])  # the peer's 2DGS layout: third scale 0
-    t["scales"] = t["scales3"][:, :2].contiguous()
-    return t
 
 
 def gma_step(t: dict, backward: bool, ctx, size) -> None:
