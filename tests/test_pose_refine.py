@@ -354,6 +354,10 @@ def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu
     assert not torch.allclose(refined, plain_poses, atol=1e-5)
     assert score(refined)["psnr"] > score(plain_poses)["psnr"] - 1.5
     assert score(plain_poses)["psnr"] > score(frames.poses)["psnr"] + 2   # the plain fit corrects it too
+    # This perturbation's root position ends closer with the term on all three VMs (on the Intel one about
+    # 0.25 against 0.68 cm), its rotation within 0.3 deg of the plain fit's (3.01 against 3.35 deg there).
+    without = _root_error(plain_poses, truth)
+    assert after[1] < without[1] and after[0] < without[0] + 0.3, (after, without)
 
 
 @pytest.mark.slow
