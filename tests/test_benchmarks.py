@@ -165,3 +165,14 @@ def test_shader_ab_times_public_steps():
         bad = run(*args)
         assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr
         assert message in bad.stderr.strip().splitlines()[-1]
+
+
+def test_first_call_refuses_a_pause_that_is_not_positive():
+    """``first_call.py --pause 0`` (or a negative or non-numeric pause) gets one line naming the option and
+    exit 2, before it renders anything."""
+    for value in ("0", "-1", "soon"):
+        bad = subprocess.run([sys.executable, str(BENCH / "first_call.py"), "--pause", value, "--count", "500"],
+                             cwd=REPO, capture_output=True, text=True, timeout=300,
+                             env=dict(os.environ, PYTHONPATH=str(REPO)))
+        assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr
+        assert "--pause" in bad.stderr.strip().splitlines()[-1] and bad.stdout == ""
