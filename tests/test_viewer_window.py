@@ -61,6 +61,35 @@ def test_window_frame_matches_offscreen_render(window):
     assert (shot[..., :3] < 240).any(-1).mean() > 0.05  # and it is not just background
 
 
+fitted_avatar_file = viewer_helpers.fitted_avatar_file  # fixture
+
+
+@pytest.mark.parametrize("size", [(160, 120), (320, 240)])
+def test_fitted_avatar_opens_whole_on_the_first_frame(gpu, fitted_avatar_file, xvfb_display, size):
+    """A fitted avatar opened fresh, canonical pose, no interaction: the first presented frame and the
+    frames shown again after it equal an offscreen render from a renderer of its own (which checks that no
+    surfel was dropped)."""
+    pytest.importorskip("glfw")
+    from gma.view import FrameRenderer
+    from gma.view.source import avatar_source
+    from viewer.state import ViewerState
+    from viewer.window import ViewerWindow
+
+    w, h = size
+    state = ViewerState(gpu, avatar_source(gpu, fitted_avatar_file))
+    win = ViewerWindow(state, w, h, panels=False)
+    try:
+        first = win.screenshot()
+        later = [win.screenshot() for _ in range(2)]
+    finally:
+        win.close()
+    offscreen = FrameRenderer(gpu).render_image(state.scene, state.camera(w, h), complete=True)
+    for shot in (first, *later):
+        diff = np.abs(shot[..., :3].astype(int) - offscreen[..., :3].astype(int))
+        assert diff.max() <= TOLERANCE, f"window differs from offscreen by up to {diff.max()}"
+    assert (first[..., :3] < 240).any(-1).mean() > 0.05
+
+
 def test_orbit_drag_moves_the_camera(window):
     import glfw
 

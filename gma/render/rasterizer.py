@@ -679,13 +679,20 @@ class SurfelRasterizer:
         self.ctx.submit(enc)
         return st
 
+    def needed_capacity(self, st: ProjectionState) -> int:
+        """The intersections the frame of ``st`` needed (reads 4 bytes, so it waits for that frame)."""
+        return int(self.ctx.read(st.stats, np.uint32, 1)[0])
+
+    def reserve_capacity(self, needed: int) -> None:
+        """Make later frames hold ``needed`` intersections, with room for a view that needs a little more."""
+        if needed > self.isect_capacity_hint:
+            self.isect_capacity_hint = int(needed * 1.25)
+
     def grow_capacity(self, st: ProjectionState) -> bool:
         """Raise the capacity hint to what a frame needed; True when that frame had dropped work."""
-        wanted = int(self.ctx.read(st.stats, np.uint32, 1)[0])
-        if wanted > self.isect_capacity_hint:
-            self.isect_capacity_hint = int(wanted * 1.25)
-            return True
-        return False
+        before = self.isect_capacity_hint
+        self.reserve_capacity(self.needed_capacity(st))
+        return self.isect_capacity_hint != before
 
 
 CAPACITY_OFFSET = 116  # byte offset of RenderParams.isect_capacity

@@ -9,7 +9,10 @@ A frame is three submissions and no readback:
 3. one render pass into the target: blit of that image (stretched when smaller), then the mesh overlays
    (depth pre-pass, coarse surfels, wireframe, normals, selection highlight) and screen-space lines.
 A frame whose view has not changed since the last full frame skips step 2 and shows that image again.
-``SurfelRasterizer.grow_capacity`` (a 4-byte read) runs only every ``capacity_every`` frames.
+``SurfelRasterizer.grow_capacity`` (a 4-byte read) runs only every ``capacity_every`` frames, except that a
+full frame is never left with dropped surfels: the first full frame of a source is checked at once and
+redrawn if it overflowed the intersection capacity, and a later full frame is checked before it is shown
+again (its work is finished by then, so the read does not stall).
 """
 
 from __future__ import annotations
@@ -115,6 +118,9 @@ class FrameRenderer:
         self._drawn: tuple | None = None  # (view key, quality) of the surfel image in self._image
         self.surfel_frames = 0  # frames that ran the surfel renderer (the others reused its image)
         self._spread: tuple | None = None  # (source id, count, order) for the cheaper frames' surfels
+        self._drawn_capacity = 0  # intersection capacity the image in self._image was drawn with
+        self._drawn_checked = True  # whether that image is known to hold every intersection
+        self._checked_sources: set = set()  # sources whose first full frame was checked
 
     # -- resources ------------------------------------------------------------------------------------
     def _ensure_image(self, w: int, h: int) -> None:
@@ -196,39 +202,35 @@ class FrameRenderer:
 
     def draw(self, scene: Scene, camera: Camera, target: wgpu.GPUTextureView, target_format: str,
              lines: list[np.ndarray] | None = None, timer=None, images: list[ScreenImage] | None = None,
-             quality: FrameQuality | None = FULL) -> None:
+             quality: FrameQuality | None = FULL, complete: bool = False) -> None:
         """Draw ``scene`` seen by ``camera`` into ``target`` (a texture view of ``camera``'s size and
         ``target_format``). ``lines``: screen-space polylines [P, 2] in pixels; ``images``: quads drawn
         over everything (:class:`ScreenImage`); ``timer``: a :class:`gma.view.timing.FrameTimer` on
         sampled frames. ``quality``: how to draw the surfels (:class:`FrameQuality`); None shows the
         previous full frame's surfel image again when :meth:`view_key` is unchanged, and draws a full
-        frame otherwise. Overlays are drawn every frame."""
+        frame otherwise. ``complete``: check a full frame for surfels dropped to the intersection capacity
+        and redraw it if any were (a 4-byte read that waits for the frame; always done for a source's
+        first full frame). Overlays are drawn every frame."""
         ctx, opts, src = self.ctx, scene.options, scene.source
         w, h = camera.width, camera.height
         key = self.view_key(scene, camera)
         reuse = quality is None and self._drawn == (key, FULL) and self._image is not None
+        if reuse and not self._drawn_checked and self._dropped_work():
+            reuse = False  # the full frame on screen lost surfels to the capacity: draw it again, complete
         quality = quality or FULL
-        enc = ctx.device.create_command_encoder(label="viewer.pose")
-        if timer:
-            timer.mark(enc, "pose.begin")
-        src.encode_update(enc)
-        surfels = src.surfels
         if opts.surfels and not reuse:
-            order = self._spread_order(src) if quality.stride > 1 else None
-            surfels = self.subset.encode(enc, src.surfels, quality.stride, order)
-        if timer:
-            timer.mark(enc, "pose.end")
-        ctx.submit(enc)
+            self._draw_surfels(scene, camera, quality, key, timer)
+            must_check = complete or id(src) not in self._checked_sources
+            if quality.is_full and must_check and self._dropped_work():
+                self._draw_surfels(scene, camera, quality, key, None)
+                self._drawn_checked = True  # drawn again with the capacity the same view just needed
+            if quality.is_full:
+                self._checked_sources.add(id(src))
+            if not self._drawn_checked and self.frames % self.capacity_every == 0:
+                self._dropped_work()  # frames in motion only adapt the capacity; they are not redrawn
+        else:
+            self._encode_pose(src, None, None, timer)
         self._set_background(opts.background)
-        image_size = quality.image_size(w, h)
-        if opts.surfels and not reuse:
-            self._ensure_image(*image_size)
-            self.last_state = self.rasterizer.render_to_texture(surfels, camera.resized(*image_size),
-                                                                self._image_view, self._background, timer)
-            self._drawn = (key, quality)
-            self.surfel_frames += 1
-            if self.frames % self.capacity_every == 0:
-                self.rasterizer.grow_capacity(self.last_state)
         self.frames += 1
         self._ensure_depth(w, h)
         enc = ctx.device.create_command_encoder(label="viewer.overlay")
@@ -256,6 +258,47 @@ class FrameRenderer:
         if timer:
             timer.resolve(enc)
         ctx.submit(enc)
+
+    def _encode_pose(self, src, quality: FrameQuality | None, order, timer):
+        """Pose the source (when its pose changed) and, for a cheaper frame, thin its surfels; returns the
+        surfel buffers to draw."""
+        enc = self.ctx.device.create_command_encoder(label="viewer.pose")
+        if timer:
+            timer.mark(enc, "pose.begin")
+        src.encode_update(enc)
+        surfels = src.surfels
+        if quality is not None:
+            surfels = self.subset.encode(enc, src.surfels, quality.stride, order)
+        if timer:
+            timer.mark(enc, "pose.end")
+        self.ctx.submit(enc)
+        return surfels
+
+    def _draw_surfels(self, scene: Scene, camera: Camera, quality: FrameQuality, key, timer) -> None:
+        """Pose and render the surfel image of ``quality`` into ``self._image``."""
+        src = scene.source
+        order = self._spread_order(src) if quality.stride > 1 else None
+        surfels = self._encode_pose(src, quality, order, timer)
+        self._set_background(scene.options.background)
+        image_size = quality.image_size(camera.width, camera.height)
+        self._ensure_image(*image_size)
+        self._drawn_capacity = self.rasterizer.isect_capacity_hint
+        self.last_state = self.rasterizer.render_to_texture(surfels, camera.resized(*image_size),
+                                                            self._image_view, self._background, timer)
+        self._drawn = (key, quality)
+        self._drawn_checked = False
+        self.surfel_frames += 1
+
+    def _dropped_work(self) -> bool:
+        """Whether the last surfel image needed more intersections than it was drawn with (reads 4 bytes and
+        raises the capacity hint to what it needed)."""
+        if self.last_state is None:
+            self._drawn_checked = True
+            return False
+        needed = self.rasterizer.needed_capacity(self.last_state)
+        self.rasterizer.reserve_capacity(needed)
+        self._drawn_checked = needed <= self._drawn_capacity
+        return not self._drawn_checked
 
     def _draw_mesh_overlays(self, rp, scene: Scene, camera: Camera, fmt: str, mesh) -> None:
         opts = scene.options
@@ -343,13 +386,7 @@ class FrameRenderer:
                 size=(w, h, 1), format=OFFSCREEN_FORMAT,
                 usage=wgpu.TextureUsage.RENDER_ATTACHMENT | wgpu.TextureUsage.COPY_SRC, label="viewer.offscreen")
         view = self._offscreen.create_view()
-        before = self.rasterizer.isect_capacity_hint
-        self.draw(scene, camera, view, OFFSCREEN_FORMAT, lines=lines, images=images)
-        # draw() itself grows the capacity every few frames (the first included): a raised hint means this
-        # frame dropped intersections even when grow_capacity has nothing left to report.
-        if complete and scene.options.surfels and (self.rasterizer.grow_capacity(self.last_state)
-                                                   or self.rasterizer.isect_capacity_hint != before):
-            self.draw(scene, camera, view, OFFSCREEN_FORMAT, lines=lines, images=images)
+        self.draw(scene, camera, view, OFFSCREEN_FORMAT, lines=lines, images=images, complete=complete)
         return read_texture(self.ctx, self._offscreen)
 
 
