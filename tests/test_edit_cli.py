@@ -87,5 +87,60 @@ def test_refuses_to_overwrite_input(files, capsys):
     src = files / "in.gma"
     before = src.read_bytes()
     assert main(["edit", str(src), "-o", str(src), "--select", "region:hands", "--paint", "red"]) == 2
-    assert "--overwrite" in capsys.readouterr().err
+    assert "--force" in capsys.readouterr().err
     assert src.read_bytes() == before
+
+
+def test_refuses_to_replace_an_existing_output_without_force(files, capsys):
+    out = files / "kept.gma"
+    out.write_bytes(b"the user's own file")
+    argv = ["edit", str(files / "in.gma"), "-o", str(out), "--select", "region:hands", "--paint", "red"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--force" in err
+    assert out.read_bytes() == b"the user's own file"
+    assert main(argv + ["--force"]) == 0
+    assert main(argv + ["--overwrite"]) == 0  # the old name still works
+
+
+def _stamped_faces(files, out, *select_and_stamp):
+    from gma.avatar import Avatar
+
+    argv = ["edit", str(files / "in.gma"), "-o", str(out), "--view", "front", "--view-size", "128",
+            "--stamp", "shape:circle", "--color", "#2040c0", *select_and_stamp]
+    assert main(argv) == 0
+    record = Avatar.load(out).history[-1]
+    assert record["op"] == "stamp"
+    return record
+
+
+@pytest.mark.parametrize("case", ["selection_larger_than_footprint", "selection_smaller_than_footprint"])
+def test_stamp_into_a_selection(files, case):
+    """The selection's weights follow the faces the footprint keeps, whichever of the two is larger."""
+    from gma.avatar import Avatar
+    from gma.body import load_body
+    from gma.edit import Selection
+
+    before = Avatar.load(files / "in.gma")
+    out = files / f"{case}.gma"
+    if case == "selection_larger_than_footprint":
+        region, size = "torso", "0.1m"
+    else:
+        region, size = "head", "1m"
+    _stamped_faces(files, out, "--select", f"region:{region}", "--size", size)
+    after = Avatar.load(out)
+    changed = (after.model.f_tex != before.model.f_tex).any(1).nonzero().reshape(-1)
+    inside = set(Selection.from_regions(load_body(before.body_name), region).faces.tolist())
+    assert len(changed) > 0 and set(changed.tolist()) <= inside
+    if case == "selection_larger_than_footprint":
+        assert len(changed) < 0.5 * len(inside)
+
+
+def test_stamp_that_misses_the_selection_is_one_line(files, capsys):
+    out = files / "missed.gma"
+    argv = ["edit", str(files / "in.gma"), "-o", str(out), "--view", "front", "--view-size", "128",
+            "--stamp", "shape:circle", "--select", "region:hand.L", "--at", "64,10", "--size", "10px"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "covers no visible surfel of the selection" in err, err
+    assert not out.exists()

@@ -26,7 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("avatar", help="the .gma avatar to edit")
     p.add_argument("-o", "--out", help="where to write the edited avatar (atomically)")
-    p.add_argument("--overwrite", action="store_true", help="allow -o to name the input file")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing -o file (the input file too, when -o names it)")
+    # The name this option had before every command said --force; kept so that old scripts still run.
+    p.add_argument("--overwrite", dest="force", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--select", action="append", default=[], metavar="SPEC", help="faces to edit (see above)")
     p.add_argument("--deselect", action="append", default=[], metavar="SPEC", help="faces to leave out")
     p.add_argument("--grow", type=int, default=0, help="grow the selection by N rings of faces")
@@ -158,6 +161,7 @@ def _stamp(ed, sel, args):
 def run(args: argparse.Namespace) -> int:
     # Bad input raises EditError (a GmaError): gma.cli prints it as one line and exits with 2.
     from gma.avatar import Avatar
+    from gma.core.outputs import prepare_output_file
     from gma.edit import EditError, Editor, summarize
 
     src = Path(args.avatar)
@@ -168,10 +172,12 @@ def run(args: argparse.Namespace) -> int:
                         "--revert or --history")
     if edits and not args.out:
         raise EditError("-o/--out is required to write the edited avatar")
-    if edits and Path(args.out).resolve() == src.resolve() and not args.overwrite:
-        raise EditError(f"-o {args.out} is the input file; pass --overwrite to replace it")
     if args.out and Path(args.out).suffix.lower() != ".gma":
         raise EditError(f"-o {args.out}: the output must be a .gma file")
+    if edits and Path(args.out).resolve() == src.resolve() and not args.force:
+        raise EditError(f"-o {args.out} is the input file; pass --force to replace it")
+    if edits:
+        prepare_output_file(args.out, args.force, "edited avatar")
     if args.mirror and (args.paint is None and args.transfer is None):
         raise EditError("--mirror applies to --paint and --transfer (a stamp is placed from one view: stamp "
                         "each side from its own view)")

@@ -167,14 +167,19 @@ class Editor:
 
         placement = placement or StampPlacement()
         nk = self.model.config.fine_per_face
-        cand = selection.require().faces if selection is not None else torch.arange(self.num_faces)
+        if selection is not None:
+            cand, face_weights = selection.require().faces, selection.face_weights()
+        else:
+            cand, face_weights = torch.arange(self.num_faces), None
         # Only faces near the image's footprint can be hit: placing and projecting every surfel of the
         # body would cost more than the solve.
         cx, cy, size_px = resolve_placement(view, placement, cand)
         ih, iw = image.shape[:2]
         reach = 0.5 * size_px * math.hypot(ih, iw) / max(ih, iw) + 4.0  # half-diagonal + a surfel's spread
-        near = np.hypot(view.px[cand.numpy(), 0] - cx, view.px[cand.numpy(), 1] - cy) <= reach
-        cand = cand[torch.from_numpy(near)]
+        near = torch.from_numpy(np.hypot(view.px[cand.numpy(), 0] - cx, view.px[cand.numpy(), 1] - cy) <= reach)
+        cand = cand[near]
+        if face_weights is not None:
+            face_weights = face_weights[near]  # the selection's weights follow the faces kept
         if len(cand) == 0:
             raise EditError("the stamp covers no visible surfel of the selection (check the view, centre and size)")
         asked, placement = placement, StampPlacement((cx, cy), size_px, "px", placement.rotation)
@@ -183,7 +188,7 @@ class Editor:
         sub = b.select(rows)
         with torch.no_grad():
             means, _, _ = place_surfels(torch.as_tensor(view.vertices), self.body.faces, sub)
-        sw = None if selection is None else selection.face_weights().repeat_interleave(nk)
+        sw = None if face_weights is None else face_weights.repeat_interleave(nk)
         tol = self.model.config.fine_offset_max + 0.005
         colors, weights, _ = stamp_targets(view, means, sub.face_id, image, placement, sw, tol)
         weights = torch.from_numpy(weights).reshape(-1, nk)
