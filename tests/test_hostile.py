@@ -417,6 +417,52 @@ def test_stale_litter_is_cleaned_and_an_old_copy_restored(tmp_path):
     assert not list(tmp_path.glob(".seq.*"))
 
 
+def test_the_clean_up_leaves_what_a_running_process_writes(tmp_path):
+    """Litter of a dead writer goes; the temporary file of a process still writing the same output stays."""
+    import subprocess
+    import sys
+
+    from gma.core.outputs import prepare_output_file
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True, check=True)
+    alive = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        litter = tmp_path / f".a.gma.{dead.stdout.strip()}-x1.tmp"
+        working = tmp_path / f".a.gma.{alive.pid}-x2.tmp"
+        litter.write_bytes(b"half")
+        working.write_bytes(b"being written")
+        prepare_output_file(tmp_path / "a.gma")
+        assert not litter.exists() and working.read_bytes() == b"being written"
+    finally:
+        alive.kill()
+        alive.wait()
+
+
+@pytest.mark.slow
+def test_two_edits_writing_one_output_at_once_leave_one_whole_file(avatar_file, tmp_path):
+    """Two ``gma edit`` processes paint different colours into the same output at the same moment: both
+    finish (exit 0, or exit 2 with one line when the other's file appeared first), and the output is the
+    whole file of one of them, with no temporary file left beside it."""
+    import subprocess
+    import sys
+
+    from gma.avatar import Avatar
+
+    out = tmp_path / "same.gma"
+    colours = ["#ff0000", "#0000ff"]
+    runs = [subprocess.Popen([sys.executable, "-m", "gma.cli", "edit", str(avatar_file), "-o", str(out),
+                              "--select", "region:torso", "--paint", c, "--force"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for c in colours]
+    results = [(p.wait(timeout=600), p.stderr.read()) for p in runs]
+    for code, err in results:
+        assert code == 0 or (code == 2 and len(err.strip().splitlines()) == 1), err
+        assert "Traceback" not in err
+    record = Avatar.load(out).history[-1]
+    assert record["op"] == "paint" and record["params"]["color"] in ([1, 0, 0], [0, 0, 1]), record
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["same.gma"]
+
+
 def test_outputs_respect_the_umask(tmp_path):
     from gma.core.atomic import atomic_write_bytes
 

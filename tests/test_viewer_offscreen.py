@@ -170,6 +170,26 @@ def test_body_controls_pose_shape_and_playback(small_body_source):
 
 
 @pytest.mark.gpu
+def test_motion_label_names_what_plays(gpu, small_body_source, tmp_path):
+    """The motion list shows what plays: a built-in motion, a file's name, canonical after a reset."""
+    from gma.body.motion_files import save_motion
+    from gma.view.controls import load_motion
+    from viewer.state import ViewerState
+
+    state = ViewerState(gpu, small_body_source)
+    assert state.motion_label == "canonical"
+    state.play_motion("walk", frames=8)
+    assert state.motion_label == "walk"
+    state.controls.reset_pose()
+    assert state.motion_label == "canonical"
+    save_motion(tmp_path / "mine.npz", load_motion("wave", small_body_source.body, 8))
+    state.play_motion(str(tmp_path / "mine.npz"), frames=8)
+    assert state.motion_label == "mine.npz"
+    state.play_motion(None)
+    assert state.motion_label == "canonical"
+
+
+@pytest.mark.gpu
 @pytest.mark.parametrize("out", ["clip.gif", "clip.mp4", "frames"])
 def test_recorder_writes_outputs(gpu, small_body_source, tmp_path, out):
     import imageio.v3 as iio

@@ -39,7 +39,6 @@ class Panels:
         self.donor_path = ""
         self.save_as_path = ""
         self._hex: str | None = None  # the hex field's text while it is being typed
-        self._motion_index = 0
 
     # -- input from glfw --------------------------------------------------------------------------------
     @property
@@ -132,9 +131,12 @@ class Panels:
         ctl = s.controls
         if ctl is not None:
             items = ["canonical"] + list(MOTIONS)
-            changed, self._motion_index = imgui.combo("motion", self._motion_index, items)
-            if changed:
-                s.play_motion(None if self._motion_index == 0 else items[self._motion_index])
+            playing = s.motion_label
+            if playing not in items:
+                items.append(playing)  # a motion file given with --motion or loaded below
+            changed, index = imgui.combo("motion", items.index(playing), items)
+            if changed and items[index] != playing:
+                s.play_motion(None if index == 0 else items[index])
             _, self.motion_path = imgui.input_text("motion file", self.motion_path)
             imgui.same_line()
             if imgui.button("load##motion") and self.motion_path:
@@ -164,7 +166,6 @@ class Panels:
         ctl = self.state.controls
         if imgui.button("canonical pose"):
             ctl.reset_pose()
-            self._motion_index = 0
         imgui.text("shape")
         for i, label in enumerate(ctl.shape_space.labels[:10]):  # SMPL-X: the first betas
             lo, hi = ctl.shape_range(i)

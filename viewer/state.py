@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gma.body.motions import MOTIONS
 from gma.core.camera import Camera
 from gma.core.errors import InputError
 from gma.gpu import GpuContext
@@ -49,6 +50,7 @@ class ViewerState:
         self.recorder: Recorder | None = None
         self.message = ""
         self.edit = EditTools(self) if getattr(source, "body", None) is not None else None
+        self._motion_label = "canonical"
 
     # -- camera ---------------------------------------------------------------------------------------
     def camera(self, width: int, height: int) -> Camera:
@@ -84,6 +86,14 @@ class ViewerState:
         if self.controls is None:
             raise ValueError("this source has no body to animate")
         self.controls.set_motion(None if spec is None else load_motion(spec, self.source.body, frames))
+        self._motion_label = "canonical" if spec is None else spec if spec in MOTIONS else Path(spec).name
+
+    @property
+    def motion_label(self) -> str:
+        """What plays, as the motion list names it: ``canonical``, a built-in motion or a file's name."""
+        if self.controls is None or self.controls.motion is None:
+            return "canonical"
+        return self._motion_label
 
     def tick(self, dt: float) -> None:
         """Advance time by ``dt`` seconds (playback)."""

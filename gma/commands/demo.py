@@ -27,6 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run, preset="quick")
 
 
+def format_metric(name: str, value: float) -> str:
+    """One metric as the summary prints it: every PSNR in dB with two decimals, other scores with four."""
+    return f"{name} {value:.2f} dB" if name.startswith("psnr") else f"{name} {value:.4f}"
+
+
 def run(args: argparse.Namespace) -> int:
 
     from gma.avatar.gpu import AvatarRenderer
@@ -34,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from gma.avatar.video import orbit_cameras, render_turntable, sequence_camera, write_video
     from gma.body import load_body, motion
     from gma.commands._demo_edit import edit_stage
-    from gma.core.atomic import atomic_write_json
+    from gma.core.atomic import atomic_write_bytes, atomic_write_json
     from gma.data import read_sequence
     from gma.gpu import get_context
     from gma.render.image_io import save_png
@@ -108,13 +113,12 @@ def run(args: argparse.Namespace) -> int:
              f"avatar {avatar_path} ({summary['avatar_mb']} MB, {summary['surfels']} surfels), "
              f"fit {fit_metrics['steps']} steps at {fit_metrics['resolution'][1]} px in {times['fit_s']:.0f} s"]
     for split, m in results.items():
-        lines.append(f"{split:10s} " + "  ".join(f"{k} {v:.4f}" if k != "psnr" else f"psnr {v:.2f} dB"
-                                                  for k, v in m.items()))
+        lines.append(f"{split:10s} " + "  ".join(format_metric(k, v) for k, v in m.items()))
     for e in editing["edits"]:
         lines.append(f"edit: {e['edit']}: {e['faces']} faces in {e['seconds']:.2f} s")
     lines.append(f"edited avatar {editing['files'][0]} (second person fitted against the same decoders in "
                  f"{times['donor_fit_s']:.0f} s); pictures in {out / 'edits'}")
     lines.append(f"videos: {turntable}, {animation}, {editing['files'][1]}; total {times['total_s']:.0f} s")
-    (out / "summary.txt").write_text("\n".join(lines) + "\n")
+    atomic_write_bytes(out / "summary.txt", ("\n".join(lines) + "\n").encode())
     print("\n".join(lines))
     return 0

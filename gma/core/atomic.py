@@ -22,7 +22,29 @@ import numpy as np
 from gma.core.errors import OutputExistsError
 
 __all__ = ["atomic_dir", "atomic_file", "atomic_write_bytes", "atomic_write_json", "atomic_write_npz",
-           "ordinary_mode"]
+           "ordinary_mode", "temp_prefix", "writer_is_alive"]
+
+
+def temp_prefix(path: Path) -> str:
+    """The hidden prefix of a temporary file or folder beside ``path``. It names the writing process, so
+    that the clean-up of an earlier killed run (:func:`gma.core.outputs.clean_stale`) can tell litter from
+    the work in progress of another process writing the same output at the same moment."""
+    return f".{path.name}.{os.getpid()}-"
+
+
+def writer_is_alive(temp_name: str, path: Path) -> bool:
+    """Whether the process that made the temporary ``temp_name`` beside ``path`` still runs (names without
+    a process id are an older layout: taken as litter)."""
+    pid = temp_name[len(f".{path.name}."):].split("-", 1)[0]
+    if not pid.isdigit():
+        return False
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # another user's process
+    return True
 
 
 def ordinary_mode(folder: bool = False) -> int:
@@ -49,7 +71,7 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     (readers see the old file or the complete new one), on an exception removed."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=temp_prefix(path), suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, ordinary_mode())
@@ -106,7 +128,7 @@ def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pat
     if path.exists() and not overwrite:
         raise OutputExistsError(f"{path}: already exists; pass --force to replace it")
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(path), suffix=".partial", dir=path.parent))
     os.chmod(tmp, ordinary_mode(folder=True))
     try:
         yield tmp
@@ -115,7 +137,7 @@ def atomic_dir(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Pat
         raise
     old = None
     if path.exists():
-        old = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".old", dir=path.parent))
+        old = Path(tempfile.mkdtemp(prefix=temp_prefix(path), suffix=".old", dir=path.parent))
         os.replace(path, old / "dir")
     os.replace(tmp, path)
     _fsync_dir(path.parent)

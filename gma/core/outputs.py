@@ -22,6 +22,7 @@ import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+from gma.core.atomic import writer_is_alive
 from gma.core.errors import OutputError, OutputExistsError
 
 __all__ = ["clean_stale", "prepare_output_dir", "prepare_output_file"]
@@ -41,14 +42,16 @@ def _writable_parent(path: Path) -> None:
 
 
 def clean_stale(path: Path) -> None:
-    """Remove what an interrupted atomic write of ``path`` left beside it (see the module doc)."""
+    """Remove what an interrupted atomic write of ``path`` left beside it (see the module doc). What a
+    running process is writing right now is left alone: two runs may write the same output at once, and
+    then the last complete file wins."""
     parent = path.parent
     if not parent.is_dir():
         return
     prefix = f".{path.name}."
     for entry in parent.iterdir():
         name = entry.name
-        if not name.startswith(prefix):
+        if not name.startswith(prefix) or writer_is_alive(name, path):
             continue
         if (name.endswith(".tmp") or ".tmp." in name) and entry.is_file():
             entry.unlink(missing_ok=True)

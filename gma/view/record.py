@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.core.atomic import ordinary_mode
+from gma.core.atomic import ordinary_mode, temp_prefix
 from gma.core.errors import OutputError
 from gma.core.outputs import prepare_output_dir, prepare_output_file
 from gma.view.orbit import CameraPath
@@ -79,9 +79,9 @@ class Recorder:
         self._gif_frames: list[np.ndarray] = []
         self.out.parent.mkdir(parents=True, exist_ok=True)
         if self.kind == "frames":
-            self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.out.name}.", suffix=".partial", dir=self.out.parent))
+            self._tmp = Path(tempfile.mkdtemp(prefix=temp_prefix(self.out), suffix=".partial", dir=self.out.parent))
         else:
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.out.name}.", suffix=".tmp" + self.out.suffix,
+            fd, tmp = tempfile.mkstemp(prefix=temp_prefix(self.out), suffix=".tmp" + self.out.suffix,
                                        dir=self.out.parent)
             os.close(fd)
             self._tmp = Path(tmp)
