@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gma.synth.mesh_raster import MeshRasterizer, TexturedMesh, projection_matrix
+from gma.core.camera import projection_matrix
+from gma.synth.mesh_raster import MeshRasterizer, TexturedMesh
 
 pytestmark = pytest.mark.gpu
 

@@ -215,7 +215,14 @@ def test_eval_and_cli(seq, anny_body, gpu, tmp_path, capsys):
     assert rc in (0, None)
     res = json.loads((tmp_path / "ev" / "metrics_test_pose.json").read_text())
     assert len(res["frames"]) == 2 and res["mean"]["psnr"] > 10 and 0 < res["mean"]["ssim"] <= 1
-    assert "mean" in (tmp_path / "ev" / "metrics_test_pose.txt").read_text()
+    table = (tmp_path / "ev" / "metrics_test_pose.txt").read_text()
+    assert "mean" in table and "region" in table
+    # per region: the front-facing held-out frames show the face, the arms and the rest of the person
+    for name in ("face", "arms", "rest"):
+        r = res["regions"][name]
+        assert r["frames"] >= 1 and 0 < r["psnr"] < 99 and 0 < r["opacity"] <= 1 and -1 <= r["ssim"] <= 1
+    assert set(res["frames"][0]["regions"]) == {"rest", "face", "hands", "arms"}
+    assert res["worst"]["frames"] and res["worst"]["psnr_bbox"] <= res["mean"]["psnr_bbox"] + 1e-9
     assert list((tmp_path / "ev").glob("test_pose_*.png"))
     # synthetic sequences carry the true clothed mesh: the mesh layer is scored against it
     geometry = json.loads((tmp_path / "ev" / "geometry.json").read_text())

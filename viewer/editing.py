@@ -165,7 +165,7 @@ class EditTools:
         key = (cam.viewmat.tobytes(), cam.K.tobytes(), cam.width, cam.height, self.source.pose_version)
         if key != self._view_key:
             if self._ids is None:
-                from gma.edit.idrender import FaceIdRenderer
+                from gma.render.face_id import FaceIdRenderer
 
                 self._ids = FaceIdRenderer(self.state.ctx, self.body.faces.numpy())
             self._view = ScreenView.render(self._ids, self.source.posed_vertices(), self.body.faces.numpy(), cam)

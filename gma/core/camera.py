@@ -102,3 +102,19 @@ class Camera:
         except json.JSONDecodeError as exc:
             raise ValueError(f"{path}: not valid JSON ({exc})") from exc
         return Camera.from_json(data, str(path))
+
+
+def projection_matrix(
+    K: np.ndarray, width: int, height: int, near: float = 0.05, far: float = 100.0
+) -> np.ndarray:
+    """4×4 map from OpenCV camera space (x right, y down, z forward; metres) to wgpu clip space for an
+    image of ``width``×``height`` pixels, so that the projection ``K @ x`` lands on framebuffer pixel
+    coordinates (pixel centres at +0.5) and depth ``near``..``far`` maps to 0..1."""
+    fx, s, cx = K[0]
+    fy, cy = K[1, 1], K[1, 2]
+    P = np.zeros((4, 4))
+    P[0] = [2 * fx / width, 2 * s / width, 2 * cx / width - 1, 0]
+    P[1] = [0, -2 * fy / height, 1 - 2 * cy / height, 0]
+    P[2] = [0, 0, far / (far - near), -far * near / (far - near)]
+    P[3] = [0, 0, 1, 0]
+    return P

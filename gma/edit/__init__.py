@@ -13,7 +13,6 @@ so an edited avatar still animates, re-poses and saves like a fitted one; decode
 
 from gma.edit.editor import Change, Editor, summarize
 from gma.edit.errors import EditError
-from gma.edit.idrender import FaceIdRenderer, IdImage, face_id_reference
 from gma.edit.invert import InvertConfig, solve_features
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
@@ -21,6 +20,7 @@ from gma.edit.selection import FaceGraph, Selection, load_selection, mirror_map,
 from gma.edit.stamp import StampPlacement, load_stamp_image, solid_shape
 from gma.edit.transfer import check_shared_decoders, transfer_features
 from gma.edit.views import NAMED_VIEWS, canonical_vertices, named_view, posed_vertices
+from gma.render.face_id import FaceIdRenderer, IdImage, face_id_reference
 
 __all__ = ["NAMED_VIEWS", "Change", "EditError", "Editor", "FaceGraph", "FaceIdRenderer", "IdImage", "InvertConfig",
            "ScreenView", "Selection", "StampPlacement", "canonical_vertices", "check_shared_decoders",

@@ -98,8 +98,8 @@ class Editor:
 
     def _id_renderer(self):
         if self._ids is None:
-            from gma.edit.idrender import FaceIdRenderer
             from gma.gpu import get_context
+            from gma.render.face_id import FaceIdRenderer
 
             self._ctx = self._ctx or get_context()
             self._ids = FaceIdRenderer(self._ctx, self.body.faces.numpy())

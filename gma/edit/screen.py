@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gma.core.camera import Camera
-from gma.edit.idrender import FaceIdRenderer, IdImage
+from gma.render.face_id import FaceIdRenderer, IdImage
 
 __all__ = ["ScreenView", "face_centres_on_screen", "faces_in_box", "faces_in_lasso", "points_in_polygon",
            "visible_faces"]

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import wgpu
 
+from gma.core.camera import projection_matrix
 from gma.gpu import GpuContext
 
-__all__ = ["MeshRasterizer", "TexturedMesh", "projection_matrix", "vertex_normals"]
+__all__ = ["MeshRasterizer", "TexturedMesh", "vertex_normals"]
 
 _SHADER = "synth/mesh.wgsl"
 _STRIDE = 8 * 4  # position (3), normal (3), uv (2) float32 per triangle corner
@@ -56,22 +57,6 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         np.add.at(n, faces[:, k], fn)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return (n / np.maximum(length, 1e-20)).astype(np.float32)
-
-
-def projection_matrix(
-    K: np.ndarray, width: int, height: int, near: float = 0.05, far: float = 100.0
-) -> np.ndarray:
-    """4×4 map from OpenCV camera space (x right, y down, z forward; metres) to wgpu clip space for an
-    image of ``width``×``height`` pixels, so that the projection ``K @ x`` lands on framebuffer pixel
-    coordinates (pixel centres at +0.5) and depth ``near``..``far`` maps to 0..1."""
-    fx, s, cx = K[0]
-    fy, cy = K[1, 1], K[1, 2]
-    P = np.zeros((4, 4))
-    P[0] = [2 * fx / width, 2 * s / width, 2 * cx / width - 1, 0]
-    P[1] = [0, -2 * fy / height, 1 - 2 * cy / height, 0]
-    P[2] = [0, 0, far / (far - near), -far * near / (far - near)]
-    P[3] = [0, 0, 1, 0]
-    return P
 
 
 class MeshRasterizer:

@@ -14,19 +14,23 @@ import torch
 from gma.avatar.avatar import Avatar
 from gma.avatar.posing import frame_params
 from gma.body import load_body
+from gma.body.skinning import linear_blend_skinning
 from gma.core.atomic import atomic_write_json
+from gma.gpu import get_context
 from gma.render.image_io import save_png
 from gma.synth.generate import gt_mesh
 from gma.train.data import load_frames
 from gma.train.losses import GeometryTerms, load_lpips
 from gma.train.metrics import box_metrics, mask_iou, psnr, ssim
 from gma.train.pose_refine import TEST_TIME_MSE, PoseRefineConfig, refine_frozen
+from gma.train.regions import RegionMapper, mean_by_region, region_metrics
 from gma.train.render_step import render_frame
 
 __all__ = ["EVAL_SPLITS", "evaluate", "evaluate_splits", "format_table", "geometry_metrics"]
 
 # The held-out splits of a synthetic or imported sequence: novel poses and novel views.
 EVAL_SPLITS = ("test_pose", "test_view")
+WORST = 5  # frames in the "worst" mean
 
 
 def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None, resolution: int = 512,
@@ -54,7 +58,7 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
         decoded = avatar.decode()
     rows = _score(decoded, body, frames, None, background, ctx, lp, out_dir, split, images)
     result = {"split": split, "sequence": str(seq.root), "resolution": list(frames.images.shape[1:3]),
-              "identity_delta": _identity_delta(avatar, seq, frames.indices[0]), "frames": rows, "mean": _mean(rows)}
+              "identity_delta": _identity_delta(avatar, seq, frames.indices[0]), "frames": rows, **_summaries(rows)}
     if refine_steps > 0:
         small = load_frames(seq, body, split, min(refine_resolution, resolution), identity=avatar.shape)
         refine = refine or PoseRefineConfig()
@@ -64,7 +68,7 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
             bones = body.bone_transforms({"pose": poses, "shape": frames.shape})
         rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images)
         result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]), "coarse_to_fine": True,
-                             "mse": TEST_TIME_MSE, "bones": refine.bones, "frames": rows_r, "mean": _mean(rows_r),
+                             "mse": TEST_TIME_MSE, "bones": refine.bones, "frames": rows_r, **_summaries(rows_r),
                              "poses": corr.summary()}
     if out_dir is not None:
         out_dir = Path(out_dir)
@@ -80,7 +84,15 @@ def _identity_delta(avatar: Avatar, seq, frame: int) -> float:
 
 
 def _mean(rows: list[dict]) -> dict:
-    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k != "frame"}
+    return {k: float(np.mean([r[k] for r in rows])) for k in rows[0] if k not in ("frame", "regions")}
+
+
+def _summaries(rows: list[dict]) -> dict:
+    """The means a result carries beside its frames: over all frames, over the ``WORST`` frames by
+    person-box PSNR (where an avatar fails, which a mean over many easy frames hides), and by region."""
+    worst = sorted(rows, key=lambda r: r["psnr_bbox"])[:WORST]
+    return {"mean": _mean(rows), "worst": {"frames": [r["frame"] for r in worst], **_mean(worst)},
+            "regions": mean_by_region([r["regions"] for r in rows])}
 
 
 def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str, images: int) -> list[dict]:
@@ -88,14 +100,18 @@ def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str
     up to ``images`` side-by-side PNGs named ``<name>_<frame>.png`` into ``out_dir`` when given."""
     rows = []
     keep = set(np.linspace(0, len(frames) - 1, min(images, len(frames))).round().astype(int).tolist())
+    mapper = RegionMapper(ctx or get_context(), body)
     with torch.no_grad():
         for t in range(len(frames)):
-            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=False,
-                                  bones=None if bones is None else bones[t])
+            frame_bones = frames.bones[t] if bones is None else bones[t]
+            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=False, bones=frame_bones)
             target = frames.target(t, background)
             render = out.color.clamp(0, 1)
             row = {"frame": frames.indices[t], "psnr": psnr(render, target), "ssim": float(ssim(render, target)),
                    **box_metrics(render, target, frames.masks[t]), "mask_iou": mask_iou(out.alpha, frames.masks[t])}
+            posed = linear_blend_skinning(frames.rest[t], body.skin_indices, body.skin_weights, frame_bones)
+            regions = mapper.maps(posed, frames.w2c[t], frames.K[t], frames.masks[t])
+            row["regions"] = region_metrics(render, target, out.alpha, frames.masks[t], regions)
             if lp is not None:
                 row["lpips"] = float(lp(render, target))
             rows.append(row)
@@ -192,4 +208,15 @@ def _rows(result: dict) -> list[str]:
     for r in result["frames"]:
         lines.append(f"{r['frame']:>6}  " + "  ".join(_fmt(k, r[k]) for k in keys))
     lines.append("  mean  " + "  ".join(_fmt(k, result["mean"][k]) for k in keys))
+    if len(result["frames"]) > WORST:
+        lines.append(f"worst {WORST} " + "  ".join(_fmt(k, result["worst"][k]) for k in keys))
+    return lines + _region_rows(result["regions"])
+
+
+def _region_rows(regions: dict) -> list[str]:
+    """Per region: PSNR and SSIM over its pixels, mean rendered opacity inside the person's mask there."""
+    lines = ["region      psnr       ssim    opacity  frames"]
+    for name, r in regions.items():
+        cells = ["   absent" if r[k] is None else _fmt(k, r[k]) for k in ("psnr", "ssim", "opacity")]
+        lines.append(f"{name:>6}  " + "  ".join(cells) + f"  {r['frames']:>6}")
     return lines

@@ -8,7 +8,7 @@ import math
 import torch
 import torch.nn.functional as F
 
-__all__ = ["box_metrics", "mask_iou", "person_box", "psnr", "separable_blur", "ssim"]
+__all__ = ["box_metrics", "mask_iou", "person_box", "psnr", "separable_blur", "ssim", "ssim_map"]
 
 
 def psnr(a: torch.Tensor, b: torch.Tensor) -> float:
@@ -31,9 +31,9 @@ def separable_blur(t: torch.Tensor, kernel: torch.Tensor, mode: str = "constant"
     return F.conv2d(F.pad(t, (0, 0, r, r), mode=mode), kernel.view(1, 1, -1, 1).expand(k, 1, -1, 1), groups=k)
 
 
-def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
-    """Mean structural similarity of [H, W, C] images in [0, 1] (Wang et al. 2004, gaussian 11×11, σ 1.5,
-    zero-padded like the 3DGS loss). Differentiable; returns a scalar tensor."""
+def ssim_map(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """[H, W] structural similarity of [H, W, C] images in [0, 1] at each pixel, averaged over channels
+    (Wang et al. 2004, gaussian 11×11, σ 1.5, zero-padded like the 3DGS loss). Differentiable."""
     c = a.shape[-1]
     x, y = a.permute(2, 0, 1)[None], b.permute(2, 0, 1)[None]  # [1, C, H, W]
     # The five local means in one pass, the 11×11 window as a row and a column of 11 taps (the same sums
@@ -43,7 +43,13 @@ def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5)
     sxx, syy, sxy = exx - mx**2, eyy - my**2, exy - mx * my
     c1, c2 = 0.01**2, 0.03**2
     s = ((2 * mx * my + c1) * (2 * sxy + c2)) / ((mx**2 + my**2 + c1) * (sxx + syy + c2))
-    return s.mean()
+    return s[0].mean(0)
+
+
+def ssim(a: torch.Tensor, b: torch.Tensor, window: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    """Mean structural similarity of [H, W, C] images in [0, 1] (:func:`ssim_map` averaged); returns a
+    scalar tensor."""
+    return ssim_map(a, b, window, sigma).mean()
 
 
 def person_box(mask: torch.Tensor, pad: float = 0.05) -> tuple[int, int, int, int] | None:

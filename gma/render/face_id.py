@@ -1,7 +1,8 @@
 """Face-ID render: for a camera and posed vertices, the visible face at every pixel and its depth.
 
-This is the visibility test of editing: a brush or box selects only faces that are actually seen (an arm
-in front of the torso hides the torso's faces), and a stamp changes only surfels at the visible depth.
+This is the visibility test of editing (a brush or box selects only faces that are actually seen: an arm
+in front of the torso hides the torso's faces; a stamp changes only surfels at the visible depth) and the
+region map of ``gma eval``'s per-region scores (:mod:`gma.train.regions`).
 The fixed-function pipeline with a depth buffer does the work (``shaders/wgsl/edit/face_id.wgsl``);
 ``face_id_reference`` is its numpy twin for tests (a per-triangle z-buffer, slow, tiny meshes only).
 """
@@ -13,9 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import wgpu
 
-from gma.core.camera import Camera
+from gma.core.camera import Camera, projection_matrix
 from gma.gpu import GpuContext
-from gma.synth.mesh_raster import projection_matrix
 
 __all__ = ["FaceIdRenderer", "IdImage", "face_id_reference"]
 

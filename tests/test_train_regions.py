@@ -1,0 +1,84 @@
+"""Per-region scores of ``gma eval``: region maps from the posed body, PSNR / SSIM / opacity over a
+region's pixels, and absent regions reported as None, never NaN."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from gma.train.metrics import ssim, ssim_map
+from gma.train.regions import REGION_ORDER, RegionMapper, face_region_codes, mean_by_region, region_metrics
+
+
+def _images(h=24, w=32, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    target = torch.rand(h, w, 3, generator=g)
+    render = target.clone()
+    return render, target
+
+
+def test_region_scores_follow_their_own_pixels():
+    render, target = _images()
+    render[:, 16:] += 0.1  # only the right half is off, by 0.1 in every channel
+    alpha = torch.ones(24, 32, 1)
+    alpha[:, 16:] = 0.5  # and half transparent there
+    mask = torch.ones(24, 32, 1)
+    left = np.zeros((24, 32), bool)
+    left[:, :16] = True
+    scores = region_metrics(render.clamp(max=2), target, alpha, mask, {"face": left, "hands": ~left})
+    assert scores["face"]["psnr"] == 99.0 and scores["face"]["opacity"] == 1.0
+    assert scores["hands"]["psnr"] == pytest.approx(20.0, abs=1e-3)  # 10 log10(1 / 0.1^2)
+    assert scores["hands"]["opacity"] == pytest.approx(0.5)
+    assert scores["face"]["ssim"] > scores["hands"]["ssim"]
+
+
+def test_a_region_the_frame_does_not_show_is_absent_not_nan():
+    render, target = _images()
+    nowhere = np.zeros((24, 32), bool)
+    outside_mask = np.zeros((24, 32), bool)
+    outside_mask[0, 0] = True
+    mask = torch.zeros(24, 32, 1)  # the person covers nothing: no opacity to average
+    scores = region_metrics(render, target, torch.ones(24, 32, 1), mask, {"hands": nowhere, "face": outside_mask})
+    assert scores["hands"] == {"psnr": None, "ssim": None, "opacity": None}
+    assert scores["face"]["psnr"] == 99.0 and scores["face"]["opacity"] is None
+    means = mean_by_region([scores, scores])
+    assert means["hands"] == {"psnr": None, "ssim": None, "opacity": None, "frames": 0}
+    assert means["face"]["frames"] == 2
+    assert not any(isinstance(v, float) and math.isnan(v) for r in means.values() for v in r.values())
+
+
+def test_ssim_is_the_mean_of_its_map():
+    render, target = _images(seed=1)
+    render = (render + 0.05 * torch.randn(render.shape, generator=torch.Generator().manual_seed(2))).clamp(0, 1)
+    assert float(ssim(render, target)) == pytest.approx(float(ssim_map(render, target).mean()), abs=1e-7)
+    assert ssim_map(render, target).shape == (24, 32)
+
+
+@pytest.mark.gpu
+def test_region_map_of_the_body_from_the_front(gpu, anny_body):
+    """The canonical body seen from the front: the head shows as face at the top, hands at the sides, and
+    a person-mask pixel off the body counts as the rest."""
+    from gma.core.camera import Camera
+
+    codes = face_region_codes(anny_body)
+    assert set(np.unique(codes)) == set(range(len(REGION_ORDER)))
+    rest = anny_body.rest_vertices(anny_body.canonical_params())
+    lo, hi = rest.min(0).values.numpy(), rest.max(0).values.numpy()
+    centre = (lo + hi) / 2
+    up = np.zeros(3)
+    up[2 if anny_body.up_axis == "z" else 1] = 1.0  # the world direction shown upwards
+    forward = np.zeros(3)
+    forward[1 if anny_body.up_axis == "z" else 2] = -1.0
+    cam = Camera.look_at(centre - 4.0 * forward, centre, up=up, fov_y_deg=30, width=64, height=64)
+    mask = torch.zeros(64, 64, 1)
+    mask[0, 0] = 1.0
+    maps = RegionMapper(gpu, anny_body).maps(rest, torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K), mask)
+    assert maps["rest"][0, 0]
+    for name in ("face", "hands", "arms", "rest"):
+        assert maps[name].sum() > 0, name
+    face_rows = np.nonzero(maps["face"].any(1))[0]
+    body_rows = np.nonzero((maps["rest"] | maps["arms"]).any(1))[0]
+    assert face_rows.mean() < body_rows.mean()  # the face above the body (image y grows downwards)
