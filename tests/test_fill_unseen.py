@@ -106,3 +106,60 @@ def test_fill_groups_split_the_body_without_overlap():
     groups = fill_groups(regions)
     names = [FILL_GROUPS[g] for g in groups]
     assert names == ["chest", "arms", "lower_body", "head", "hands", "chest"]  # face 5: in no region
+
+
+# -- on the Anny body ----------------------------------------------------------------------------------
+
+def _front_seen(avatar, body) -> torch.Tensor:
+    """[F] seen scores of a clip filmed straight from the front: 1 where the rest face turns to -y."""
+    from gma.body.geometry import face_normals
+
+    normals = face_normals(avatar.rest_vertices, body.faces)
+    return (normals[:, 1] < -0.2).float()
+
+
+def test_fill_gives_the_back_the_colour_of_its_garment(anny_body):
+    from edit_helpers import GARMENTS, fitted_avatar
+
+    from gma.avatar import Avatar
+    from gma.edit import Selection
+    from gma.edit.unseen import SEEN, fill_unseen_faces
+
+    avatar = fitted_avatar(anny_body)
+    seen = _front_seen(avatar, anny_body)
+    m = avatar.model
+    with torch.no_grad():  # the back as an unfitted clip leaves it: features nothing taught
+        m.f_tex[seen < SEEN] = 0.1 * torch.randn(int((seen < SEEN).sum()), m.f_tex.shape[1],
+                                                 generator=torch.Generator().manual_seed(3))
+    before_seen = m.f_tex[seen >= SEEN].clone()
+    back_torso = (seen < SEEN) & anny_body.region_mask("torso")
+    want = torch.tensor(GARMENTS["torso"])
+
+    def back_error():
+        with torch.no_grad():
+            return float((m.fine_outputs()[1][back_torso].mean((0, 1)) - want).abs().mean())
+
+    error_before = back_error()
+    summary = fill_unseen_faces(avatar, anny_body, seen, mirror=True)
+    assert back_error() < 0.05 < error_before
+    assert torch.equal(m.f_tex[seen >= SEEN], before_seen)  # seen faces keep their features
+    assert 0.2 < summary["guessed"]["area"] < 0.8 and avatar.info["unseen"] == summary
+    again = Avatar.load(avatar.save(Path_tmp() / "filled.gma"), anny_body)
+    assert torch.equal(again.face_seen, avatar.face_seen)
+    assert torch.equal(Selection.unseen(again).faces, torch.nonzero(seen < SEEN).reshape(-1))
+
+
+def Path_tmp():
+    import tempfile
+    from pathlib import Path
+
+    return Path(tempfile.mkdtemp())
+
+
+def test_unseen_selection_needs_the_record(anny_body):
+    from edit_helpers import fitted_avatar
+
+    from gma.edit import EditError, Selection
+
+    with pytest.raises(EditError, match="no record of what"):
+        Selection.unseen(fitted_avatar(anny_body))

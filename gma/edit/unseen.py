@@ -1,10 +1,10 @@
 """What the training frames saw of an avatar, and the features of what they did not.
 
-:func:`observe_faces` counts, per face, the visible pixels of face-ID renders of the posed mesh at every
-training camera, each weighted by the cosine between the face's normal and the direction to the camera
-(a face seen at a grazing angle says little about its colour). :func:`seen_score` maps that to [0, 1],
-saved in the ``.gma`` as ``face_seen``; a face under 0.5 (:data:`SEEN`) is "unseen" (``gma edit --select
-unseen``, the viewer's and ``gma eval``'s seen / guessed overlay).
+:func:`observe_faces` measures, per face, how much of it face-ID renders of the posed mesh show at every
+training camera (visible pixels over its projected area), each frame weighted by the cosine between the
+face's normal and the direction to the camera (a face seen at a grazing angle says little about its
+colour). :func:`seen_score` maps that to [0, 1], saved in the ``.gma`` as ``face_seen``; a face under 0.5
+(:data:`SEEN`) is "unseen" (``gma edit --select unseen``, ``gma eval``'s seen / guessed picture).
 
 :func:`fill_unseen_faces` is the step after a fit: the decoded colours of the unseen faces are filled
 from the seen ones (:func:`gma.avatar.fill.fill_unseen`: over the surface within body-part groups, plus
@@ -14,6 +14,7 @@ a front-to-back prior for the garments), then turned into ordinary features by t
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 
 import numpy as np
@@ -25,44 +26,60 @@ from gma.core.camera import Camera
 from gma.edit.errors import EditError
 from gma.edit.paint import paint_features
 
-__all__ = ["SEEN", "SEEN_PIXELS", "depth_axis", "face_areas", "fill_unseen_faces", "guessed_share",
-           "observe_faces", "seen_score", "unseen_mask"]
+__all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "AfterFit", "depth_axis", "face_areas", "fill_unseen_faces",
+           "guessed_share", "observe_faces", "projected_areas", "seen_score", "unseen_mask"]
 
-# A face's weighted pixel count at which its seen score is 1 - 1/e: about one head-on pixel summed over
-# the clip. Below SEEN (0.7 px) the fit had next to nothing to learn its colour from.
-SEEN_PIXELS = 1.0
+# A face's summed cover (:func:`observe_faces`) at which its seen score is 1 - 1/e: half of it seen in one
+# frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
+SEEN_COVER = 0.5
 SEEN = 0.5
+# Face-ID renders are made at least this large (longest side, pixels), whatever the fit's resolution, so
+# that faces smaller than a fitting pixel are still found where they show.
+ID_RESOLUTION = 512
 
 
-def observe_faces(renderer, faces: torch.Tensor, meshes: Iterable[tuple[np.ndarray, Camera]],
-                  supersample: int = 2) -> np.ndarray:
+def observe_faces(renderer, faces: torch.Tensor, meshes: Iterable[tuple[np.ndarray, Camera]]) -> np.ndarray:
     """[F] float64: per face of ``faces`` [F, 3] (the mesh ``renderer``, a
-    :class:`gma.edit.idrender.FaceIdRenderer`, draws), the sum over ``meshes`` (pairs of posed vertices
-    [V, 3] and the camera that saw them) of its visible pixels times the cosine of its viewing angle (0
-    when turned away). Pixels are counted at the camera's resolution; ``supersample`` renders at that
-    factor (then divides), so a face smaller than a pixel still counts for its share."""
+    :class:`gma.edit.idrender.FaceIdRenderer`, draws), its cover summed over ``meshes`` (pairs of posed
+    vertices [V, 3] and the camera that saw them): the visible fraction of its projected area (pixels of
+    a face-ID render over its triangle's area in pixels; occluded parts do not count) times the cosine of
+    its viewing angle (0 when turned away). A fraction, not a pixel count, so the score does not depend on
+    the fitting resolution."""
     from gma.avatar.posing import face_away_cosine
 
     faces = torch.as_tensor(faces).long()
-    num_faces = len(faces)
-    total = np.zeros(num_faces)
+    total = np.zeros(len(faces))
     for verts, cam in meshes:
-        s = int(supersample)
+        s = max(1, math.ceil(ID_RESOLUTION / max(int(cam.width), int(cam.height))))
         K = np.asarray(cam.K, np.float64).copy()
         K[:2] *= s
-        big = Camera(cam.viewmat, K, int(cam.width) * s, int(cam.height) * s)
+        big = Camera(np.asarray(cam.viewmat, np.float32), K.astype(np.float32), int(cam.width) * s,
+                     int(cam.height) * s)
         ids = renderer.render(verts, big).ids
-        pixels = np.bincount(ids[ids >= 0].ravel(), minlength=num_faces)[:num_faces] / (s * s)
-        cosine = -face_away_cosine(torch.as_tensor(np.asarray(verts), dtype=torch.float32), faces,
-                                   torch.as_tensor(np.asarray(cam.viewmat), dtype=torch.float32))
-        total += pixels * cosine.clamp_min(0.0).double().numpy()
+        pixels = np.bincount(ids[ids >= 0].ravel(), minlength=len(faces))[:len(faces)]
+        area = projected_areas(np.asarray(verts, np.float64), faces.numpy(), big)
+        cover = np.minimum(pixels / np.maximum(area, 1e-9), 1.0)
+        v = torch.as_tensor(np.asarray(verts), dtype=torch.float32)
+        cosine = -face_away_cosine(v, faces, torch.as_tensor(big.viewmat, dtype=torch.float32))
+        total += cover * cosine.clamp_min(0.0).double().numpy()
     return total
 
 
-def seen_score(pixels) -> torch.Tensor:
-    """[F] float32 in [0, 1]: 1 - exp(-pixels / SEEN_PIXELS) of :func:`observe_faces`' counts."""
-    p = torch.as_tensor(np.asarray(pixels, np.float64))
-    return (1.0 - torch.exp(-p.clamp_min(0) / SEEN_PIXELS)).float()
+def projected_areas(vertices: np.ndarray, faces: np.ndarray, camera: Camera) -> np.ndarray:
+    """[F] area in pixels of each triangle projected by ``camera`` (0 for one behind the camera)."""
+    view = np.asarray(camera.viewmat, np.float64)
+    pc = vertices @ view[:3, :3].T + view[:3, 3]
+    z = np.maximum(pc[:, 2], 1e-6)
+    px = (pc[:, :2] / z[:, None]) @ np.asarray(camera.K, np.float64)[:2, :2].T
+    a, b, c = px[faces[:, 0]], px[faces[:, 1]], px[faces[:, 2]]
+    area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+    return np.where((pc[faces, 2] > 1e-3).all(1), area, 0.0)
+
+
+def seen_score(cover) -> torch.Tensor:
+    """[F] float32 in [0, 1]: 1 - exp(-cover / SEEN_COVER) of :func:`observe_faces`' summed cover."""
+    c = torch.as_tensor(np.asarray(cover, np.float64))
+    return (1.0 - torch.exp(-c.clamp_min(0) / SEEN_COVER)).float()
 
 
 def unseen_mask(avatar) -> torch.Tensor:
@@ -131,3 +148,30 @@ def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, fro
                "mirror": bool(mirror)}
     avatar.info["unseen"] = summary
     return summary
+
+
+class AfterFit:
+    """The step after a fit (``Trainer(finish=AfterFit(ctx))``): counts what the training frames saw of
+    each face with face-ID renders, stores it in the avatar and, with ``fill``, fills the unseen faces
+    (:func:`fill_unseen_faces`). ``ctx``: the GPU context (default: the shared one, made on first use)."""
+
+    def __init__(self, ctx=None, fill: bool = True, front_back: float = 0.5):
+        self.ctx, self.fill, self.front_back = ctx, fill, front_back
+        self._renderer = None
+
+    def _renderer_for(self, body):
+        if self._renderer is None or self._renderer.num_faces != body.num_faces:
+            from gma.edit.idrender import FaceIdRenderer
+            from gma.gpu import get_context
+
+            self.ctx = self.ctx or get_context()
+            self._renderer = FaceIdRenderer(self.ctx, body.faces.numpy())
+        return self._renderer
+
+    def __call__(self, avatar, body, meshes, mirror: bool = True) -> dict:
+        seen = seen_score(observe_faces(self._renderer_for(body), body.faces, meshes))
+        if self.fill:
+            return fill_unseen_faces(avatar, body, seen, mirror, self.front_back)
+        avatar.face_seen = seen
+        avatar.info["unseen"] = summary = {"guessed": guessed_share(avatar, body), "filled": None}
+        return summary
