@@ -118,7 +118,7 @@ def _front_seen(avatar, body) -> torch.Tensor:
     return (normals[:, 1] < -0.2).float()
 
 
-def test_fill_gives_the_back_the_colour_of_its_garment(anny_body):
+def test_fill_gives_the_back_the_colour_of_its_garment(anny_body, tmp_path):
     from edit_helpers import GARMENTS, fitted_avatar
 
     from gma.avatar import Avatar
@@ -144,16 +144,9 @@ def test_fill_gives_the_back_the_colour_of_its_garment(anny_body):
     assert back_error() < 0.05 < error_before
     assert torch.equal(m.f_tex[seen >= SEEN], before_seen)  # seen faces keep their features
     assert 0.2 < summary["guessed"]["area"] < 0.8 and avatar.info["unseen"] == summary
-    again = Avatar.load(avatar.save(Path_tmp() / "filled.gma"), anny_body)
+    again = Avatar.load(avatar.save(tmp_path / "filled.gma"), anny_body)
     assert torch.equal(again.face_seen, avatar.face_seen)
     assert torch.equal(Selection.unseen(again).faces, torch.nonzero(seen < SEEN).reshape(-1))
-
-
-def Path_tmp():
-    import tempfile
-    from pathlib import Path
-
-    return Path(tempfile.mkdtemp())
 
 
 def test_unseen_selection_needs_the_record(anny_body):
@@ -163,3 +156,93 @@ def test_unseen_selection_needs_the_record(anny_body):
 
     with pytest.raises(EditError, match="no record of what"):
         Selection.unseen(fitted_avatar(anny_body))
+
+
+def test_projected_area_of_a_triangle():
+    from gma.core.camera import Camera
+    from gma.edit.unseen import projected_areas
+
+    cam = Camera(np.eye(4, dtype=np.float32), np.array([[100.0, 0, 50], [0, 100.0, 50], [0, 0, 1]]), 100, 100)
+    verts = np.array([[0.0, 0.0, 2.0], [0.2, 0.0, 2.0], [0.0, 0.2, 2.0], [0.0, 0.0, -1.0]])
+    areas = projected_areas(verts, np.array([[0, 1, 2], [0, 1, 3]]), cam)
+    assert areas[0] == pytest.approx(0.5 * 10 * 10)  # 0.2 m at 2 m with f = 100 px: 10 px legs
+    assert areas[1] == 0.0  # a corner behind the camera
+
+
+def _front_camera(verts, size=96):
+    from gma.edit.views import named_view
+
+    return named_view("front", verts, "z", size, size)
+
+
+def test_observe_faces_sees_the_front_not_the_back(anny_body, gpu):
+    from gma.body.geometry import face_normals
+    from gma.edit.idrender import FaceIdRenderer
+    from gma.edit.unseen import SEEN, observe_faces, seen_score
+
+    params = anny_body.canonical_params(None)
+    verts = anny_body.rest_vertices(params)
+    from gma.body.skinning import linear_blend_skinning
+
+    posed = linear_blend_skinning(verts, anny_body.skin_indices, anny_body.skin_weights,
+                                  anny_body.bone_transforms(params)).numpy()
+    renderer = FaceIdRenderer(gpu, anny_body.faces.numpy())
+    cover = observe_faces(renderer, anny_body.faces, [(posed, _front_camera(posed))])
+    score = seen_score(cover)
+    normals = face_normals(torch.as_tensor(posed), anny_body.faces)
+    torso = anny_body.region_mask("torso")
+    front, back = torso & (normals[:, 1] < -0.8), torso & (normals[:, 1] > 0.3)
+    assert float((score[front] >= SEEN).float().mean()) > 0.9  # seen head-on (a few hide under the arms)
+    assert float(score[back].max()) == 0.0  # turned away: never counted
+    twice = seen_score(observe_faces(renderer, anny_body.faces, [(posed, _front_camera(posed))] * 2))
+    assert bool((twice[front] >= score[front]).all())  # more frames, more seen
+
+
+def test_seen_picture_is_green_in_front_and_magenta_behind(anny_body, gpu):
+    from gma.avatar import Avatar, AvatarConfig
+    from gma.edit.unseen import GUESSED_COLOR, SEEN_COLOR, seen_picture
+
+    avatar = Avatar.create(AvatarConfig(feature_dim=8, fine_per_face=1, hidden=16), anny_body)
+    avatar.face_seen = _front_seen(avatar, anny_body)
+    pic = seen_picture(avatar, anny_body, gpu, size=64)
+    assert pic.shape == (64, 256, 3)
+    front, back = pic[:, :64].reshape(-1, 3), pic[:, 64:128].reshape(-1, 3)
+
+    def hue_share(panel, color):
+        person = panel[(panel < 0.99).any(1)]
+        direction = color / np.linalg.norm(color)
+        cosines = person @ direction / np.maximum(np.linalg.norm(person, axis=1), 1e-6)
+        return float((cosines > 0.97).mean())
+
+    assert hue_share(front, SEEN_COLOR) > 0.7 and hue_share(back, GUESSED_COLOR) > 0.7
+
+
+@pytest.mark.slow
+def test_fit_of_a_front_only_clip_records_and_fills_the_back(anny_body, gpu, tmp_path, capsys):
+    import json
+
+    from gma.avatar import Avatar
+    from gma.cli import main
+    from gma.synth.generate import SynthConfig, synthesize
+
+    cfg = SynthConfig(width=48, height=48, train_frames=4, test_pose_frames=1, test_view_frames=1, supersample=1,
+                      texture_size=128)
+    seq = synthesize(tmp_path / "seq", cfg, ctx=gpu, body=anny_body, progress=False)
+    splits = json.loads((seq.root / "splits.json").read_text())
+    (seq.root / "splits.json").write_text(json.dumps({**splits, "train": [0]}))  # facing the camera only
+    out = tmp_path / "me.gma"
+    assert main(["fit", str(seq.root), "-o", str(out), "--quiet", "--resolution", "48", "--stage1-steps", "2",
+                 "--stage2-steps", "2", "--preview-every", "0", "--avatar.feature-dim", "8",
+                 "--avatar.fine-per-face", "1"]) == 0
+    assert "never seen well" in capsys.readouterr().out
+    avatar = Avatar.load(out, anny_body)
+    guessed = avatar.info["unseen"]["guessed"]["area"]
+    assert 0.3 < guessed < 0.8  # the back, the soles, what hides under the arms
+    from gma.body.geometry import face_normals
+    from gma.edit.unseen import SEEN
+
+    chest_front = anny_body.region_mask("torso") & (face_normals(avatar.rest_vertices, anny_body.faces)[:, 1] < -0.8)
+    assert float((avatar.face_seen[chest_front] >= SEEN).float().mean()) > 0.8
+    painted = tmp_path / "painted.gma"
+    assert main(["edit", str(out), "-o", str(painted), "--select", "unseen", "--paint", "#2040c0"]) == 0
+    assert torch.equal(Avatar.load(painted, anny_body).face_seen, avatar.face_seen)  # edits keep the record

@@ -59,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {written} ({avatar.info['fit_seconds']} s, {avatar.info['steps']} steps); "
           f"config, metrics and previews in {work_dir(trainer.out)}")
     for sub in trainer.subjects:
+        if "unseen" in sub.avatar.info:
+            g = sub.avatar.info["unseen"]["guessed"]
+            print(f"{sub.out}: {100 * g['area']:.0f} % of the body surface ({100 * g['faces']:.0f} % of the faces) was "
+                  "never seen well by the frames and was filled in from the seen faces (gma edit --select unseen)")
         if sub.poses is not None:
             r = sub.avatar.info["pose_refinement"]
             print(f"refined poses of {sub.seq.root} in {refined_body_path(sub.out)} (mean correction "

@@ -27,7 +27,7 @@ from gma.edit.errors import EditError
 from gma.edit.paint import paint_features
 
 __all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "AfterFit", "depth_axis", "face_areas", "fill_unseen_faces",
-           "guessed_share", "observe_faces", "projected_areas", "seen_score", "unseen_mask"]
+           "guessed_share", "observe_faces", "projected_areas", "seen_picture", "seen_score", "unseen_mask"]
 
 # A face's summed cover (:func:`observe_faces`) at which its seen score is 1 - 1/e: half of it seen in one
 # frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
@@ -175,3 +175,33 @@ class AfterFit:
         avatar.face_seen = seen
         avatar.info["unseen"] = summary = {"guessed": guessed_share(avatar, body), "filled": None}
         return summary
+
+
+# Colours of the seen / guessed picture: a face's colour runs from GUESSED (score 0) to SEEN_COLOR (1).
+GUESSED_COLOR = np.array([0.85, 0.2, 0.6])
+SEEN_COLOR = np.array([0.3, 0.72, 0.35])
+
+
+@torch.no_grad()
+def seen_picture(avatar, body, ctx=None, size: int = 256) -> np.ndarray:
+    """[size, 4·size, 3] float in [0, 1]: the avatar's mesh in its canonical pose from the front, back,
+    left and right, each face coloured by its seen score (green seen, magenta guessed), lit by its
+    facing, on white. EditError for an avatar without the record."""
+    from gma.avatar.posing import face_away_cosine
+    from gma.edit.idrender import FaceIdRenderer
+    from gma.edit.views import NAMED_VIEWS, canonical_vertices, named_view
+    from gma.gpu import get_context
+
+    unseen_mask(avatar)  # the error for an avatar without the record
+    verts = canonical_vertices(body, avatar.model.vertex_offsets(), avatar.shape)
+    score = avatar.face_seen.numpy()[:, None]
+    colors = (1 - score) * GUESSED_COLOR + score * SEEN_COLOR
+    renderer = FaceIdRenderer(ctx or get_context(), body.faces.numpy())
+    panels = []
+    for name in NAMED_VIEWS:
+        cam = named_view(name, verts.numpy(), body.up_axis, size, size)
+        ids = renderer.render(verts.numpy(), cam).ids
+        light = (-face_away_cosine(verts, body.faces, torch.as_tensor(cam.viewmat))).abs().numpy()
+        shaded = colors * (0.35 + 0.65 * light[:, None])
+        panels.append(np.where(ids[..., None] >= 0, shaded[np.clip(ids, 0, None)], 1.0))
+    return np.concatenate(panels, 1).astype(np.float32)

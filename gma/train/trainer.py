@@ -369,11 +369,7 @@ class Trainer:
         if self.finish is None or not self.cfg.fill_unseen or self.model.direct:
             return
         sub = self.subjects[subject]
-        summary = self.finish(sub.avatar, self.body, self.posed_meshes(subject), mirror=self.cfg.symmetry > 0)
-        if self.progress:
-            g = summary["guessed"]
-            print(f"[gma] {sub.name}: {100 * g['area']:.0f} % of the body surface ({100 * g['faces']:.0f} % of the "
-                  "faces) was never seen well by the frames; filled from the seen faces")
+        self.finish(sub.avatar, self.body, self.posed_meshes(subject), mirror=self.cfg.symmetry > 0)
 
     # -- the loop --------------------------------------------------------------------------------------
     def _attach_poses(self) -> None:
@@ -505,5 +501,8 @@ class Trainer:
                   if prior is not None}
         if priors:
             metrics["symmetry_prior"] = priors
+        unseen = {sub.name: sub.avatar.info["unseen"] for sub in self.subjects if "unseen" in sub.avatar.info}
+        if unseen:
+            metrics["unseen"] = unseen
         atomic_write_json(self.dir / "metrics.json", metrics)
         return self.avatar
