@@ -10,8 +10,9 @@ Two cases, one fit each (the fill is a step after the fit, so "before" and "afte
   scored on the other side (250-290 deg), which the symmetry prior (on in both) covers.
 
 Scores per view set: PSNR over the image, and the mean absolute colour error (0-255) inside the true
-silhouette. Writes a table (stdout and ``--work``/results.json) and ``--figure``: a back view, ground
-truth | before | after.
+silhouette, before the fill and after it with each weight of its front-to-back prior (``--front-back``).
+Writes a table (stdout and ``--work``/results.json) and ``--figure``: a back view, ground truth | before |
+after (the first weight). A fit already finished in ``--work`` is reused.
 
     python benchmarks/unseen_sides.py --size 192 --frames 36 --steps 200 400
 """
@@ -30,6 +31,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import machine  # noqa: E402
 
+from gma.avatar import Avatar  # noqa: E402
 from gma.body import load_body  # noqa: E402
 from gma.data import read_sequence  # noqa: E402
 from gma.edit.unseen import AfterFit  # noqa: E402
@@ -101,26 +103,31 @@ def _score(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, l
 
 
 def run_case(case: str, seq, work: Path, args, body, ctx) -> dict:
+    """Fit (or reuse a finished fit in ``work``), score before the fill and after it with each
+    ``--front-back`` weight (a fresh copy of the fitted avatar each)."""
     cfg = preset("quick", resolution=args.size, stage1_steps=args.steps[0], stage2_steps=args.steps[1],
                  preview_every=0)
+    out = work / f"{case.replace(' ', '_')}.gma"
     t0 = time.perf_counter()
-    trainer = Trainer(cfg, seq, work / f"{case.replace(' ', '_')}.gma", body=body, ctx=ctx, progress=False)
-    avatar = trainer.run()
+    trainer = Trainer(cfg, seq, out, body=body, ctx=ctx, progress=False)
+    avatar = trainer.run(resume=True)  # Trainer without a finish step: the avatar as the fit left it
     fit_s = time.perf_counter() - t0
     views = list(CASES[case][1])
     before = {v: _score(avatar, seq, v, args.size, body, ctx) for v in views}
-    t0 = time.perf_counter()
-    summary = AfterFit(ctx)(avatar, body, trainer.posed_meshes(0), mirror=cfg.symmetry > 0)
-    fill_s = time.perf_counter() - t0
-    after = {v: _score(avatar, seq, v, args.size, body, ctx) for v in views}
-    result = {"train_frames": len(seq.split("train")), "fit_s": round(fit_s, 1), "fill_s": round(fill_s, 1),
-              "guessed": summary["guessed"], "filled": summary["filled"],
-              "views": {v: {"before": before[v][0], "after": after[v][0]} for v in views}}
-    if case == "front":
-        k = len(before["back"][1]) // 2  # the frame nearest 180 deg
-        gt_and_before, after_img = before["back"][1][k], after["back"][1][k]
-        w = after_img.shape[1] // 2
-        result["figure"] = np.concatenate([gt_and_before, after_img[:, w:]], 1)
+    meshes = list(trainer.posed_meshes(0))
+    result = {"train_frames": len(seq.split("train")), "fit_s": round(fit_s, 1), "fills": {}}
+    for k, weight in enumerate(args.front_back):
+        filled = Avatar.load(out, body)
+        t0 = time.perf_counter()
+        summary = AfterFit(ctx, front_back=weight)(filled, body, iter(meshes), mirror=cfg.symmetry > 0)
+        after = {v: _score(filled, seq, v, args.size, body, ctx) for v in views}
+        result["fills"][weight] = {"fill_s": round(time.perf_counter() - t0, 1), "guessed": summary["guessed"],
+                                   "filled": summary["filled"], "views": {v: after[v][0] for v in views}}
+        if case == "front" and k == 0:
+            mid = len(before["back"][1]) // 2  # the frame nearest 180 deg
+            w = after["back"][1][mid].shape[1] // 2
+            result["figure"] = np.concatenate([before["back"][1][mid], after["back"][1][mid][:, w:]], 1)
+    result["before"] = {v: before[v][0] for v in views}
     return result
 
 
@@ -132,9 +139,13 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=36, help="frames in the whole turn (every 360/N deg)")
     ap.add_argument("--steps", type=int, nargs=2, default=(200, 400), help="stage 1 and stage 2 steps")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--front-back", type=float, nargs="+", default=(0.5, 0.0, 1.0),
+                    help="weights of the fill's front-to-back prior to score (the first: the default, and the figure)")
     args = ap.parse_args(argv)
     if args.size < 16 or args.frames < 6 or min(args.steps) < 1:
         ap.error("need --size >= 16, --frames >= 6 and at least one step per stage")
+    if not all(0 <= w <= 1 for w in args.front_back):
+        ap.error("--front-back weights must lie in [0, 1]")
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     ctx, body = get_context(), load_body("anny")
@@ -147,13 +158,16 @@ def main(argv=None) -> int:
             save_png(Path(args.figure), figure)
     print(f"# unseen sides: {machine()}; {args.frames}-frame turn at {args.size} px, quick preset, steps "
           f"{args.steps[0]}+{args.steps[1]}")
-    print("| case | views | train frames | PSNR before | after | colour error before | after | guessed area |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| case | views (frames) | train frames | front-back weight | PSNR before | after | colour error before "
+          "| after | guessed area |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for case, r in results.items():
-        for view, s in r["views"].items():
-            b, a = s["before"], s["after"]
-            print(f"| {case} | {view} ({b['frames']}) | {r['train_frames']} | {b['psnr']:.2f} | {a['psnr']:.2f} | "
-                  f"{b['colour_error']:.1f} | {a['colour_error']:.1f} | {100 * r['guessed']['area']:.0f} % |")
+        for view, b in r["before"].items():
+            for weight, fill in r["fills"].items():
+                a = fill["views"][view]
+                print(f"| {case} | {view} ({b['frames']}) | {r['train_frames']} | {weight:g} | {b['psnr']:.2f} | "
+                      f"{a['psnr']:.2f} | {b['colour_error']:.1f} | {a['colour_error']:.1f} | "
+                      f"{100 * fill['guessed']['area']:.0f} % |")
     (work / "results.json").write_text(json.dumps({"args": vars(args), "machine": machine(), "results": results},
                                                   indent=1, default=str))
     return 0

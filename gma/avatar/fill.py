@@ -127,40 +127,46 @@ def front_projection(values: np.ndarray, known: np.ndarray, targets: np.ndarray,
 
 
 def fill_unseen(values, known, pairs, groups, centers, depth_axis: int, front_back: float = 0.5,
-                radius: float = 0.03) -> FillResult:
+                radius: float = 0.03, sources=None) -> FillResult:
     """Fill the values of the faces that are not ``known`` (see the module docstring).
 
     values [F, D] per-face values (flattened surfel colours); known [F] bool (seen, or otherwise trusted);
     pairs [P, 2] faces sharing an edge (``gma.body.geometry.face_adjacency``); groups [F] int fill groups
     (:func:`fill_groups`); centers [F, 3] rest-pose face centres (m); depth_axis: the body's front-back
     axis (0, 1, 2); front_back in [0, 1]: weight of the front-to-back prior in the groups of
-    :data:`PROJECTED_GROUPS`; radius: how far (m) across the depth axis a face looks for its counterpart."""
+    :data:`PROJECTED_GROUPS`; radius: how far (m) across the depth axis a face looks for its counterpart;
+    sources [F] bool (default: ``known``): the known faces values are taken from. A known face that is not
+    a source keeps its value but lends it to no one: a face seen only at a grazing angle, whose colour
+    the fit blended with the silhouette's background."""
     values = np.asarray(values, np.float64)
     known = np.asarray(known, bool)
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     groups = np.asarray(groups, np.int64)
     if not 0.0 <= front_back <= 1.0:
         raise ValueError(f"front_back must be in [0, 1], got {front_back}")
+    sources = known if sources is None else np.asarray(sources, bool) & known
     n = len(values)
     how = np.where(known, 0, -1).astype(np.int8)
-    if known.all() or not known.any():
+    if known.all() or not sources.any():
         return FillResult(values.copy(), how)
     within = _adjacency(pairs, n, groups[pairs[:, 0]] == groups[pairs[:, 1]])
-    out, filled = harmonic_fill(values, known, within)
+    out, filled = harmonic_fill(values, sources, within)
+    filled &= ~known
     how[filled] = 1
-    _mix_front_projection(out, values, known, filled, groups, np.asarray(centers, np.float64), depth_axis,
+    _mix_front_projection(out, values, sources, filled, groups, np.asarray(centers, np.float64), depth_axis,
                           front_back, radius)
     rest = ~known & ~filled
-    if rest.any():  # whole group parts unseen: across groups, from everything known or filled so far
-        have = known | filled
-        across, more = harmonic_fill(out, have, _adjacency(pairs, n))
+    if rest.any():  # whole group parts unseen: across groups, from the sources and what is filled so far
+        across, more = harmonic_fill(out, sources | filled, _adjacency(pairs, n))
+        more &= rest
         out[more] = across[more]
         how[more] = 2
         rest &= ~more
     for i in np.nonzero(rest)[0]:  # components of the mesh nothing on which was seen
-        same = known & (groups == groups[i])
-        out[i] = values[same].mean(0) if same.any() else values[known].mean(0)
+        same = sources & (groups == groups[i])
+        out[i] = values[same].mean(0) if same.any() else values[sources].mean(0)
         how[i] = 3
+    out[known] = values[known]  # a known face that was no source was solved for in the systems above
     return FillResult(out, how)
 
 

@@ -26,13 +26,16 @@ from gma.core.camera import Camera
 from gma.edit.errors import EditError
 from gma.edit.paint import paint_features
 
-__all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "AfterFit", "depth_axis", "face_areas", "fill_unseen_faces",
+__all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "SOURCE", "AfterFit", "depth_axis", "face_areas", "fill_unseen_faces",
            "guessed_share", "observe_faces", "projected_areas", "seen_picture", "seen_score", "unseen_mask"]
 
 # A face's summed cover (:func:`observe_faces`) at which its seen score is 1 - 1/e: half of it seen in one
 # frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
 SEEN_COVER = 0.5
 SEEN = 0.5
+# Faces the fill takes values from: seen well (a summed cover of 0.8). A face seen only obliquely keeps its
+# own colour but lends it to no one: the fit blends such faces with the background at the silhouette.
+SOURCE = 0.8
 # Face-ID renders are made at least this large (longest side, pixels), whatever the fit's resolution, so
 # that faces smaller than a fitting pixel are still found where they show.
 ID_RESOLUTION = 512
@@ -114,7 +117,8 @@ def depth_axis(rest_vertices: torch.Tensor) -> int:
 
 
 @torch.no_grad()
-def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, front_back: float = 0.5) -> dict:
+def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, front_back: float = 0.5,
+                      source: float = SOURCE) -> dict:
     """Store ``seen`` [F] (:func:`seen_score`) in ``avatar.face_seen`` and give the faces it marks unseen
     new ``f_tex``, solved so they decode to colours filled from the seen faces. ``mirror``: a face whose
     left-right mirror was seen counts as known and keeps its features (the fit's symmetry prior taught
@@ -127,10 +131,11 @@ def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, fro
     if tuple(seen.shape) != (model.num_faces,) or not bool(torch.isfinite(seen).all()):
         raise ValueError(f"seen must be [{model.num_faces}] finite values, got {list(seen.shape)}")
     avatar.face_seen = seen.clamp(0, 1)
-    known = (seen >= SEEN).numpy()
+    known, sources = (seen >= SEEN).numpy(), (seen >= source).numpy()
     if mirror:
         try:
-            known = known | known[mirror_faces(avatar.rest_vertices, body.faces).numpy()]
+            mirror_of = mirror_faces(avatar.rest_vertices, body.faces).numpy()
+            known, sources = known | known[mirror_of], sources | sources[mirror_of]
         except ValueError:
             pass  # a body mesh without left-right symmetry: no mirror knowledge, the fill does it all
     nk = model.config.fine_per_face
@@ -138,7 +143,7 @@ def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, fro
     result = fill_unseen(colors.reshape(model.num_faces, nk * 3).double().numpy(), known,
                          face_adjacency(body.faces.long()).numpy(), fill_groups(body.regions),
                          face_centers(avatar.rest_vertices.double(), body.faces).numpy(),
-                         depth_axis(avatar.rest_vertices), front_back)
+                         depth_axis(avatar.rest_vertices), front_back, sources=sources)
     ids = torch.as_tensor(np.nonzero(result.how > 0)[0], dtype=torch.long)
     if len(ids):
         target = torch.as_tensor(result.values[ids.numpy()], dtype=torch.float32).reshape(-1, nk, 3)
@@ -155,8 +160,8 @@ class AfterFit:
     each face with face-ID renders, stores it in the avatar and, with ``fill``, fills the unseen faces
     (:func:`fill_unseen_faces`). ``ctx``: the GPU context (default: the shared one, made on first use)."""
 
-    def __init__(self, ctx=None, fill: bool = True, front_back: float = 0.5):
-        self.ctx, self.fill, self.front_back = ctx, fill, front_back
+    def __init__(self, ctx=None, fill: bool = True, front_back: float = 0.5, source: float = SOURCE):
+        self.ctx, self.fill, self.front_back, self.source = ctx, fill, front_back, source
         self._renderer = None
 
     def _renderer_for(self, body):
@@ -171,7 +176,7 @@ class AfterFit:
     def __call__(self, avatar, body, meshes, mirror: bool = True) -> dict:
         seen = seen_score(observe_faces(self._renderer_for(body), body.faces, meshes))
         if self.fill:
-            return fill_unseen_faces(avatar, body, seen, mirror, self.front_back)
+            return fill_unseen_faces(avatar, body, seen, mirror, self.front_back, self.source)
         avatar.face_seen = seen
         avatar.info["unseen"] = summary = {"guessed": guessed_share(avatar, body), "filled": None}
         return summary
