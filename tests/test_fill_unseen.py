@@ -243,6 +243,9 @@ def test_fit_of_a_front_only_clip_records_and_fills_the_back(anny_body, gpu, tmp
 
     chest_front = anny_body.region_mask("torso") & (face_normals(avatar.rest_vertices, anny_body.faces)[:, 1] < -0.8)
     assert float((avatar.face_seen[chest_front] >= SEEN).float().mean()) > 0.8
+    assert main(["eval", str(out), str(seq.root), "--split", "test_view", "--resolution", "48", "--images", "0",
+                 "--out", str(tmp_path / "eval")]) == 0
+    assert "seen / guessed" in capsys.readouterr().out and (tmp_path / "eval" / "seen.png").is_file()
     painted = tmp_path / "painted.gma"
     assert main(["edit", str(out), "-o", str(painted), "--select", "unseen", "--paint", "#2040c0"]) == 0
     assert torch.equal(Avatar.load(painted, anny_body).face_seen, avatar.face_seen)  # edits keep the record
