@@ -47,6 +47,8 @@ SMOKE: dict[str, list[str] | str] = {
     "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
                        "--repeats", "1", "--stroke-frames", "3"],
     "edit_pictures.py": ["--out", "{tmp}", "--size", "64"],
+    "unseen_sides.py": ["--size", "48", "--frames", "12", "--steps", "1", "1", "--work", "{tmp}/work", "--figure",
+                        "{tmp}/back.png"],
     "batch_scaling.py": ["--people", "1", "--size", "32", "--steps", "1", "1", "--out", "{tmp}/out"],
     "video_fit.py": "needs the video extra (MediaPipe), run by hand: python benchmarks/video_fit.py",
     "video_masks.py": ["--work", "{tmp}/work"],

@@ -171,6 +171,21 @@ def _avatar_without_body(tmp, seq_dir, avatar):
     return ["eval", str(bad), str(seq_dir)]
 
 
+def _avatar_with_bad_seen_record(tmp, seq_dir, avatar):
+    from safetensors import safe_open
+    from safetensors.torch import save
+
+    with safe_open(str(avatar), "pt") as f:
+        meta = dict(f.metadata())
+        tensors = {k: f.get_tensor(k) for k in f.keys()}
+    import torch
+
+    tensors["face_seen"] = torch.full(tensors["model.f_tex"].shape[:1], 2.0)  # scores live in [0, 1]
+    bad = tmp / "badseen.gma"
+    bad.write_bytes(save(tensors, metadata=meta))
+    return ["edit", str(bad), "-o", str(tmp / "out.gma"), "--select", "unseen", "--paint", "red"]
+
+
 BAD_BVH = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n0\n"
 
 
@@ -208,6 +223,10 @@ CASES = [
     Case("fit 8x8 images", _damaged_seq(_tiny_images), "too small"),
     # gma eval
     Case("eval an avatar without body metadata", _avatar_without_body, "nobody.gma"),
+    Case("edit an avatar whose seen record is out of range", _avatar_with_bad_seen_record, "badseen.gma"),
+    Case("edit --select unseen on an avatar without the record",
+         lambda t, s, a: ["edit", str(a), "-o", str(t / "o.gma"), "--select", "unseen", "--paint", "red"],
+         "no record of what"),
     Case("eval random bytes as an avatar",
          lambda t, s, a: ["eval", str(_ply(t / "r.gma", "garbage")), str(s)], "r.gma"),
     Case("eval a split the sequence lacks", lambda t, s, a: ["eval", str(a), str(s), "--split", "nosuch"],

@@ -283,3 +283,23 @@ def test_edits_keep_buffers_and_pipelines_and_animation_plays(avatar_state):
     assert (s.source.poser.surfels_buf, s.source.surfels.colors, s.source.surfels.means) == bufs
     assert dict(s.renderer.pipelines._cache) == pipelines
     np.testing.assert_array_equal(gpu_colors(s), s.source.decoded.colors.numpy())
+
+
+@pytest.mark.slow
+def test_select_unseen_highlights_what_the_fit_never_saw(avatar_state):
+    s, ed = avatar_state, avatar_state.edit
+    avatar = s.source.avatar
+    kept = avatar.face_seen
+    try:
+        avatar.face_seen = None
+        with pytest.raises(EditError, match="no record"):
+            ed.select_unseen()
+        seen = torch.ones(s.source.body.num_faces)
+        seen[::3] = 0.0
+        avatar.face_seen = seen
+        sel = ed.select_unseen()
+        assert sel.faces.tolist() == list(range(0, s.source.body.num_faces, 3))
+        assert s.scene.selection.tolist() == sel.faces.tolist()  # the highlight draws it
+    finally:
+        avatar.face_seen = kept
+        ed.clear()

@@ -216,6 +216,13 @@ class EditTools:
     def select_region(self, name: str, mode: str = "replace") -> Selection:
         return self.set_selection(Selection.from_regions(self.body, name), mode)
 
+    def select_unseen(self, mode: str = "replace") -> Selection:
+        """The faces the fit's frames never showed (filled in): with the selection highlight, the seen /
+        guessed overlay; then paint or transfer them like any selection."""
+        if self.avatar is None:
+            raise EditError("only an avatar records what its training frames saw")
+        return self.set_selection(Selection.unseen(self.avatar), mode)
+
     def grow(self, rings: int = 1) -> Selection:
         return self.set_selection(self.selection.grow(self._graph(), rings))
 

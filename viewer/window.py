@@ -9,7 +9,8 @@ Mouse: left drag orbits (navigate), selects (box, lasso, brush; Shift adds, Ctrl
 rotates, wheel scales); right or middle drag pans; wheel zooms. Files dropped on the window: images
 become the stamp, .gma files the transfer donor.
 Keys: Space play/pause, R reset view, N navigate, B box, L lasso, C brush select, M magic wand,
-P paint, I eyedropper, T stamp, F fill selection, Enter apply stamp, G / Shift+G grow / shrink,
+P paint, I eyedropper, T stamp, F fill selection, Enter apply stamp, G / Shift+G grow / shrink, U select
+the faces the fit never saw (the highlight shows seen / guessed),
 [ ] brush radius, X mirror left-right on/off, Ctrl+I invert, Esc clear selection, Ctrl+Z undo,
 Ctrl+Shift+Z (or Ctrl+Y) redo, Ctrl+S save, W wireframe, F1 panels on/off, 1-9 camera presets, 0 orbit
 camera. Closing with unsaved edits asks first (panels), or needs a second close (no panels).
@@ -267,6 +268,8 @@ class ViewerWindow:
             report(s, ed.fill)
         elif key in (glfw.KEY_ENTER, glfw.KEY_KP_ENTER) and ed is not None and self.tool == "stamp":
             report(s, ed.apply_stamp, self.size)
+        elif key == glfw.KEY_U and ed is not None:
+            report(s, ed.select_unseen)
         elif key == glfw.KEY_G and ed is not None:
             report(s, ed.shrink if shift else ed.grow)
         elif key == glfw.KEY_W:

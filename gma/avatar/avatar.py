@@ -52,6 +52,7 @@ class Avatar:
     rest_vertices: torch.Tensor
     history: list[dict] = field(default_factory=list)
     info: dict = field(default_factory=dict)
+    face_seen: torch.Tensor | None = None  # [F] in [0, 1], or None for an avatar fitted without the record
 
     @property
     def config(self) -> AvatarConfig:
@@ -81,6 +82,8 @@ class Avatar:
         tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
         tensors["rest_vertices"] = self.rest_vertices.contiguous()
         tensors["shape"] = self.shape.float().contiguous()
+        if self.face_seen is not None:
+            tensors["face_seen"] = self.face_seen.float().contiguous()
         meta = {"format": AVATAR_FORMAT, "version": str(FORMAT_VERSION), "body": self.body_name,
                 "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
                 "info": json.dumps(self.info)}
@@ -131,7 +134,21 @@ class Avatar:
             model.load_state_dict(state)
         except RuntimeError as exc:
             raise AvatarFileError(f"{path}: tensors do not match the avatar config ({exc})") from exc
-        return Avatar(model, meta["body"], tensors["shape"].float(), rest, history, info)
+        seen = _face_seen(path, tensors, model.num_faces)
+        return Avatar(model, meta["body"], tensors["shape"].float(), rest, history, info, seen)
+
+
+def _face_seen(path: Path, tensors: dict, num_faces: int) -> torch.Tensor | None:
+    """The optional ``face_seen`` tensor, checked: [F] values in [0, 1]."""
+    seen = tensors.get("face_seen")
+    if seen is None:
+        return None
+    seen = seen.float()
+    if tuple(seen.shape) != (num_faces,):
+        raise AvatarFileError(f"{path}: face_seen is {list(seen.shape)}, the body has {num_faces} faces")
+    if not bool(torch.isfinite(seen).all()) or float(seen.min()) < 0 or float(seen.max()) > 1:
+        raise AvatarFileError(f"{path}: face_seen holds values outside [0, 1] (damaged file)")
+    return seen
 
 
 def canonical_safetensors(data: bytes) -> bytes:

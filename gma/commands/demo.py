@@ -41,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from gma.commands._demo_edit import edit_stage
     from gma.core.atomic import atomic_write_bytes, atomic_write_json
     from gma.data import read_sequence
+    from gma.edit.unseen import AfterFit
     from gma.gpu import get_context
     from gma.render.image_io import save_png
     from gma.synth.generate import SynthConfig, synthesize
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     cfg = preset(args.preset, seed=args.seed)
     avatar_path = out / "avatar.gma"
-    trainer = Trainer(cfg, seq, avatar_path, body=body, ctx=ctx)
+    trainer = Trainer(cfg, seq, avatar_path, body=body, ctx=ctx, finish=AfterFit(ctx))
     avatar = trainer.run(resume=True)
     times["fit_s"] = time.perf_counter() - t0
 

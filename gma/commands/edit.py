@@ -10,7 +10,8 @@
 
 Selections (``--select``, repeatable, united; ``--deselect`` removes): ``region:NAME[,NAME...]`` (torso,
 arms, legs, head, hands, feet, upper_body, lower_body or a part label), a selection ``.json`` file,
-``all``, and screen-space specs in a named view of the canonical pose (``--view-size`` pixels):
+``all``, ``unseen`` (the faces the fit's frames never showed, whose look was filled in), and screen-space
+specs in a named view of the canonical pose (``--view-size`` pixels):
 ``wand:VIEW@X,Y`` (``--wand-tolerance``), ``box:VIEW@X0,Y0,X1,Y1``, ``brush:VIEW@X,Y,R``.
 Every bad input is one line naming the problem, exit code 2, and nothing is written.
 """
@@ -85,6 +86,8 @@ def parse_selection(ed, spec: str, args):
     body = ed.body
     if spec == "all":
         return Selection.everything(ed.num_faces)
+    if spec == "unseen":
+        return Selection.unseen(ed.avatar)
     if spec.startswith("region:"):
         names = [n for n in spec[len("region:"):].split(",") if n]
         if not names:
@@ -107,7 +110,7 @@ def parse_selection(ed, spec: str, args):
             return Selection.load(path, body.name, ed.num_faces)
         except (ValueError, FileNotFoundError) as exc:
             raise EditError(str(exc)) from None
-    raise EditError(f"cannot read selection {spec!r}: use region:NAME, a .json file, all, wand:VIEW@X,Y, "
+    raise EditError(f"cannot read selection {spec!r}: use region:NAME, a .json file, all, unseen, wand:VIEW@X,Y, "
                     "box:VIEW@X0,Y0,X1,Y1 or brush:VIEW@X,Y,R")
 
 

@@ -1,6 +1,8 @@
 """``gma eval avatar.gma SEQ --split test``: PSNR / SSIM over the image and inside the person's bounding
 box (/ LPIPS when its weights are installed) and mask IoU of the rendered alpha, per frame and mean,
-written as JSON and a table, with side-by-side images (target | render | error ×4).
+written as JSON and a table, with side-by-side images (target | render | error ×4). An avatar that
+records what its training frames saw (``gma fit`` does) also gets ``seen.png``: its mesh from the front,
+back, left and right, green where the frames saw it, magenta where its look was filled in (guessed).
 
 ``--refine-poses N`` also fits each evaluated frame's pose to its image for N steps with the avatar
 frozen (the PeopleSnapshot protocol of Anim-NeRF / InstantAvatar, for sequences whose poses were
@@ -70,5 +72,21 @@ def run(args: argparse.Namespace) -> int:
     geometry = results["geometry"]
     if geometry is not None:  # synthetic sequences carry the true clothed mesh
         print("mesh layer vs ground-truth clothed mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in geometry.items()))
+    _seen_picture(avatar, out)
     print(f"wrote {out}")
     return 0
+
+
+def _seen_picture(avatar, out) -> None:
+    """``out/seen.png`` and a line on how much of the avatar was guessed, when the avatar records it."""
+    from gma.body import load_body
+    from gma.edit.unseen import guessed_share, seen_picture
+    from gma.render.image_io import save_png
+
+    if avatar.face_seen is None:
+        return
+    body = load_body(avatar.body_name)
+    save_png(out / "seen.png", seen_picture(avatar, body))
+    g = guessed_share(avatar, body)
+    print(f"seen / guessed: {100 * g['area']:.0f} % of the body surface ({100 * g['faces']:.0f} % of the faces) "
+          f"was never seen well by the training frames and was filled in ({out / 'seen.png'}: magenta)")

@@ -40,6 +40,7 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from gma.commands._options import collect_overrides
     from gma.data import read_sequence
+    from gma.edit.unseen import AfterFit
     from gma.train.config import preset
     from gma.train.outputs import prepare_fit_outputs
     from gma.train.trainer import Trainer, refined_body_path, work_dir
@@ -50,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = preset(overrides.pop("preset", "quick"), **overrides)
     prepare_fit_outputs(args.output, args.sequence, args.resume, args.force)  # before reading any image
     seqs = [read_sequence(s) for s in args.sequence]
-    trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet)
+    trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet, finish=AfterFit())
     avatar = trainer.run(resume=args.resume)
     written = ", ".join(str(s.out) for s in trainer.subjects)
     if len(seqs) > 1:
@@ -58,6 +59,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {written} ({avatar.info['fit_seconds']} s, {avatar.info['steps']} steps); "
           f"config, metrics and previews in {work_dir(trainer.out)}")
     for sub in trainer.subjects:
+        if "unseen" in sub.avatar.info:
+            g = sub.avatar.info["unseen"]["guessed"]
+            print(f"{sub.out}: {100 * g['area']:.0f} % of the body surface ({100 * g['faces']:.0f} % of the faces) was "
+                  "never seen well by the frames and was filled in from the seen faces (gma edit --select unseen)")
         if sub.poses is not None:
             r = sub.avatar.info["pose_refinement"]
             print(f"refined poses of {sub.seq.root} in {refined_body_path(sub.out)} (mean correction "

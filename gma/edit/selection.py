@@ -116,6 +116,14 @@ class Selection:
         return Selection.from_mask(mask)
 
     @staticmethod
+    def unseen(avatar) -> Selection:
+        """The faces no training frame of ``avatar`` showed well (their look was filled in, not seen:
+        :func:`gma.edit.unseen.unseen_mask`); EditError for an avatar without that record."""
+        from gma.edit.unseen import unseen_mask
+
+        return Selection.from_mask(unseen_mask(avatar))
+
+    @staticmethod
     def load(path, body_model: str | None = None, num_faces: int | None = None) -> Selection:
         """A selection file (see module doc); refuses one made for another body model or mesh."""
         sf = load_selection(path, body_model, num_faces)

@@ -90,6 +90,10 @@ class FitConfig:
                                "side of the person less than the other (none on the built-in synthetic "
                                "sequences); on a real turn that stops short of the start, +0.5 dB on the "
                                "unseen views. Skipped, with a notice, for body meshes that are not symmetric")
+    fill_unseen: bool = doc(True, "after the fit, record how well the frames saw each face (saved in the avatar) and "
+                                  "give the faces no frame saw colours filled from the seen ones (gma.avatar.fill): "
+                                  "the back of a person filmed from the front. Where the caller provides the step "
+                                  "(gma fit, gma demo)")
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
     cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (2x faster on CPU)")

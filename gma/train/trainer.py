@@ -108,7 +108,7 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video"}
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -152,9 +152,15 @@ class Trainer:
     Given several sequences, it fits one avatar per sequence — each its own features and body identity —
     with one set of decoders shared by all (the paper's setup); steps take the sequences in turn, and
     ``run`` returns the first avatar. ``self.avatar``, ``self.model``, ``self.frames`` are the first
-    sequence's."""
+    sequence's.
 
-    def __init__(self, cfg: FitConfig, seq, out: str | Path, body=None, ctx=None, progress: bool = True):
+    ``finish`` (optional, with ``cfg.fill_unseen``) is called on each fitted avatar before it is saved, as
+    ``finish(avatar, body, meshes, mirror=...)`` with ``meshes`` the posed mesh and camera of every training
+    frame (:meth:`posed_meshes`), and returns a summary: :class:`gma.edit.unseen.AfterFit`, which records
+    what the frames saw and fills the rest (a layer above this one, so the command passes it in)."""
+
+    def __init__(self, cfg: FitConfig, seq, out: str | Path, body=None, ctx=None, progress: bool = True,
+                 finish=None):
         from torch import nn
 
         seqs = list(seq) if isinstance(seq, (list, tuple)) else [seq]
@@ -163,7 +169,7 @@ class Trainer:
         self.cfg, self.out = cfg, Path(out)
         self.dir = work_dir(self.out)
         self.body = body or load_body(cfg.avatar.body)
-        self.ctx, self.progress = ctx, progress
+        self.ctx, self.progress, self.finish = ctx, progress, finish
         if cfg.threads:
             torch.set_num_threads(cfg.threads)
         self.subjects: list[Subject] = []
@@ -340,6 +346,31 @@ class Trainer:
         img = torch.cat([out.color, self.frames.target(0, self.cfg.background)], 1).clamp(0, 1).numpy()
         save_png(self.dir / "previews" / f"step_{step:06d}.png", img)
 
+    # -- after the fit --------------------------------------------------------------------------------
+    @torch.no_grad()
+    def posed_meshes(self, subject: int):
+        """Yields (vertices [V, 3] float32 numpy, Camera) per training frame of ``subject``: the fitted
+        avatar's morphed mesh in the frame's (refined) pose, and the camera at the fitting resolution."""
+        from gma.body.skinning import linear_blend_skinning
+        from gma.core.camera import Camera
+
+        sub = self.subjects[subject]
+        offsets = sub.avatar.model.vertex_offsets()
+        frames, body = sub.frames, self.body
+        h, w = frames.images.shape[1:3]
+        for t in range(len(frames)):
+            bones = self._bones(subject, t, learn=False)
+            bones = frames.bones[t] if bones is None else bones
+            verts = linear_blend_skinning(frames.rest[t] + offsets, body.skin_indices, body.skin_weights, bones)
+            yield verts.numpy(), Camera(frames.w2c[t].numpy(), frames.K[t].numpy(), int(w), int(h))
+
+    def _finish(self, subject: int) -> None:
+        """Run ``finish`` (the seen record and the fill of the unseen faces) on a subject's avatar."""
+        if self.finish is None or not self.cfg.fill_unseen or self.model.direct:
+            return
+        sub = self.subjects[subject]
+        self.finish(sub.avatar, self.body, self.posed_meshes(subject), mirror=self.cfg.symmetry > 0)
+
     # -- the loop --------------------------------------------------------------------------------------
     def _attach_poses(self) -> None:
         """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``), and ``self.net``,
@@ -446,6 +477,7 @@ class Trainer:
                 sub.avatar.info["pose_refinement"] = sub.poses.summary()
             if self.symmetry[i] is not None:
                 sub.avatar.info["symmetry_prior"] = self.symmetry[i].summary()
+            self._finish(i)
             sub.avatar.save(sub.out)
             if sub.poses is not None:
                 save_refined_body(refined_body_path(sub.out), sub.seq, sub.frames.indices, sub.poses.all_poses())
@@ -469,5 +501,8 @@ class Trainer:
                   if prior is not None}
         if priors:
             metrics["symmetry_prior"] = priors
+        unseen = {sub.name: sub.avatar.info["unseen"] for sub in self.subjects if "unseen" in sub.avatar.info}
+        if unseen:
+            metrics["unseen"] = unseen
         atomic_write_json(self.dir / "metrics.json", metrics)
         return self.avatar
