@@ -43,7 +43,7 @@ ID_RESOLUTION = 512
 
 def observe_faces(renderer, faces: torch.Tensor, meshes: Iterable[tuple[np.ndarray, Camera]]) -> np.ndarray:
     """[F] float64: per face of ``faces`` [F, 3] (the mesh ``renderer``, a
-    :class:`gma.edit.idrender.FaceIdRenderer`, draws), its cover summed over ``meshes`` (pairs of posed
+    :class:`gma.render.face_id.FaceIdRenderer`, draws), its cover summed over ``meshes`` (pairs of posed
     vertices [V, 3] and the camera that saw them): the visible fraction of its projected area (pixels of
     a face-ID render over its triangle's area in pixels; occluded parts do not count) times the cosine of
     its viewing angle (0 when turned away). A fraction, not a pixel count, so the score does not depend on
@@ -166,7 +166,7 @@ class AfterFit:
 
     def _renderer_for(self, body):
         if self._renderer is None or self._renderer.num_faces != body.num_faces:
-            from gma.edit.idrender import FaceIdRenderer
+            from gma.render.face_id import FaceIdRenderer
             from gma.gpu import get_context
 
             self.ctx = self.ctx or get_context()
@@ -193,7 +193,7 @@ def seen_picture(avatar, body, ctx=None, size: int = 256) -> np.ndarray:
     left and right, each face coloured by its seen score (green seen, magenta guessed), lit by its
     facing, on white. EditError for an avatar without the record."""
     from gma.avatar.posing import face_away_cosine
-    from gma.edit.idrender import FaceIdRenderer
+    from gma.render.face_id import FaceIdRenderer
     from gma.edit.views import NAMED_VIEWS, canonical_vertices, named_view
     from gma.gpu import get_context
 
