@@ -149,7 +149,8 @@ class CheckoutWorker:
     """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
     checkout, which prints "ready" once set up and then answers each request line with one line. Lets a
     benchmark time another checkout (``--baseline``) beside this one, turns interleaved, in one run;
-    ``env`` adds variables for the worker (e.g. ``GMA_LAVAPIPE=system``: the same code on another driver)."""
+    ``env`` adds variables for the worker (e.g. the Vulkan loader's ``VK_DRIVER_FILES``: the same code on
+    another driver)."""
 
     def __init__(self, root: str | Path, script: str | Path, *args: str, env: dict[str, str] | None = None):
         self.root = self.checkout(root)

@@ -13,9 +13,10 @@ before it). On a 2-core Xeon VM (2026-12-03), 0.5 s pauses, first / later step: 
 112.1 / 79.1, busy 93.7 / 78.2; after a sleep the ``clone()`` alone took 13.3 against 0.5 ms (torch's first
 parallel op wakes its OpenMP worker), the forward 44.4 against 39.4, the backward 40.3 against 36.9. With
 ``OMP_NUM_THREADS=1`` (torch on one thread) the first step after a sleep took 81.5 and 80.8 against
-78.7 and 79.1 ms. ``GMA_OPENMP_WORKERS=spin`` changed nothing that these runs resolve (first step after a
-sleep 102.2 and 98.1 ms, its clones 16.7 and 17.7 ms; the default in the runs between 95.4 and 112.2, 12.5
-and 15.8 ms): the wait is torch's (its worker waking, presumably on an idle virtual core), not GMA's sleeping workers'.
+78.7 and 79.1 ms. Torch's OpenMP workers left spinning (now the library's default; ``gma fit`` puts them
+to sleep) changed nothing that these runs resolve (first step after a sleep 102.2 and 98.1 ms, its
+clones 16.7 and 17.7 ms; asleep, in the runs between, 95.4 and 112.2, 12.5 and 15.8 ms): the wait is torch's
+(its worker waking, presumably on an idle virtual core), not GMA's sleeping workers'.
 
     python benchmarks/first_call.py [--count 100000] [--pause 0.5] [--repeats 6]
 """

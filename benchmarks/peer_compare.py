@@ -12,11 +12,10 @@ GMA frame started after 50-300 ms of idle, even with the calling thread kept bus
 back-to-back frames took 60 ms; the peer's 1.5 s steps hardly notice.) Prints medians and the ratios.
 ``--baseline DIR`` also times another GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a
 worker process, interleaved the same way, so that a speed-up over our own earlier code is a ratio from
-one run too; ``--baseline . --baseline-env GMA_LAVAPIPE=system`` times this same code on the system's
-lavapipe instead of the newer one kept in GMA's cache (the worker's adapter is printed), and
-``--baseline . --baseline-env GMA_OPENMP_WORKERS=spin`` with torch's idle OpenMP workers spinning beside
-lavapipe's threads while GMA renders, as before 2026-12-03 (README, "Environment"); the baseline's ratio
-to the peer is printed too.
+one run too; ``--baseline . --baseline-env VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json``
+times this same code on the system's lavapipe alone instead of the newer one that
+``scripts/lavapipe_backport.py`` installs beside it (the worker's adapter is printed); the baseline's ratio to
+the peer is printed too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--burst 3] [--baseline DIR]
@@ -150,7 +149,7 @@ def main() -> int:
     ap.add_argument("--baseline", help="another GMA checkout to time beside this one (a worker process)")
     ap.add_argument("--baseline-env", action="append", metavar="KEY=VALUE",
                     help="KEY=VALUE for the baseline's worker only (repeatable); with --baseline . the "
-                         "same code on, e.g., the system's lavapipe: GMA_LAVAPIPE=system")
+                         "same code on, e.g., the system's lavapipe: VK_DRIVER_FILES=<its manifest>")
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     if args.burst < 2 or args.repeats < 1:

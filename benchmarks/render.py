@@ -60,7 +60,7 @@ def main() -> int:
     args = ap.parse_args()
     ctx = get_context()
     rast = SurfelRasterizer(ctx)
-    print(f"adapter: {ctx.name}; machine: {machine()}; subgroup path: {rast.use_subgroups}")
+    print(f"adapter: {ctx.name}; machine: {machine()}; options: {rast.options}")
     rows = []
     cases = [(f"avatar {n // 1000}k", avatar_like_scene(n), avatar_camera(s, s)) for n in args.counts
              for s in args.sizes]

@@ -9,11 +9,13 @@ B / A, and the images' and gradients' sums (equal sums: the change kept them, ve
     cp -r shaders/wgsl /tmp/a && cp -r shaders/wgsl /tmp/b   # then edit /tmp/b
     python benchmarks/shader_ab.py /tmp/a /tmp/b [--rounds 16] [--count 100000] [--scene avatar] [--size 512]
 
-Only the shaders differ: the Python side is this checkout's. ``--toggle ATTR`` instead renders with this
-checkout's shaders both times and a ``SurfelRasterizer`` switch off (A) and on (B), e.g.
-``python benchmarks/shader_ab.py --toggle use_work_queues --scene avatar``. Without ../shared's standard scene
-it renders a random scene of --count surfels. ``--scene avatar`` renders avatar-like surfels instead (small, tangent to
-a body-shaped surface; gma.render.scenes) at --size pixels square.
+Only the shaders differ: the Python side is this checkout's. ``--toggle OPTION`` instead renders with this
+checkout's shaders both times and two rasterizers whose ``RasterOptions`` differ in one switch, off (A) and
+on (B), the rest as the adapter's defaults (switching ``subgroups`` or ``tile_walk`` off also switches off
+what needs them), e.g. ``python benchmarks/shader_ab.py --toggle work_queues --scene avatar``. Without
+../shared's standard scene it renders a random scene of --count surfels. ``--scene avatar`` renders
+avatar-like surfels instead (small, tangent to a body-shaped surface; gma.render.scenes) at --size pixels
+square.
 
 ``--public`` times whole steps of the public call instead (``gma.render.rasterize``, the mean colour's
 backward, as ``peer_compare.py`` times them), alternating the directories' pipelines under the context's
@@ -26,6 +28,7 @@ step above a few percent; the pass times above resolve smaller ones.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -37,7 +40,7 @@ from common import PASSES, machine, pass_inputs, scene_and_camera  # noqa: E402
 
 from gma.gpu import PassTimer, get_context  # noqa: E402
 from gma.gpu.shaders import ShaderLibrary, shader_root  # noqa: E402
-from gma.render import SurfelRasterizer, read_outputs  # noqa: E402
+from gma.render import RasterOptions, SurfelRasterizer, read_outputs  # noqa: E402
 from gma.render.rasterizer import MAX_SURFELS  # noqa: E402
 
 
@@ -45,7 +48,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("a", nargs="?", help="shader directory A (like shaders/wgsl)")
     p.add_argument("b", nargs="?", help="shader directory B")
-    p.add_argument("--toggle", metavar="ATTR", help="a SurfelRasterizer switch, off in A and on in B (no directories)")
+    p.add_argument("--toggle", metavar="OPTION", help="a RasterOptions switch, off in A and on in B (no directories)")
     p.add_argument("--rounds", type=int, default=16)
     p.add_argument("--count", type=int, default=100000, help="surfels of the scene")
     p.add_argument("--scene", choices=("standard", "avatar"), default="standard")
@@ -64,7 +67,7 @@ def main() -> int:
     two_dirs = args.a is not None and args.b is not None
     no_dirs = args.a is None and args.b is None
     if not ((args.toggle is None and two_dirs) or (args.toggle is not None and no_dirs)):
-        print("give two shader directories, or --toggle ATTR without them", file=sys.stderr)
+        print("give two shader directories, or --toggle OPTION without them", file=sys.stderr)
         return 2
     if args.public and args.toggle:
         print("--public compares two shader directories, not a --toggle", file=sys.stderr)
@@ -73,8 +76,8 @@ def main() -> int:
         print(f"--rounds {args.rounds}: --public needs at least 2", file=sys.stderr)
         return 2
     dirs = [shader_root()] * 2 if args.toggle else [Path(args.a), Path(args.b)]
-    if args.toggle and not isinstance(getattr(SurfelRasterizer(get_context()), args.toggle, None), bool):
-        print(f"--toggle {args.toggle}: not a switch of SurfelRasterizer", file=sys.stderr)
+    if args.toggle and args.toggle not in SWITCHES:
+        print(f"--toggle {args.toggle}: not a switch of RasterOptions ({', '.join(SWITCHES)})", file=sys.stderr)
         return 2
     for d in dirs:
         if not (d / "render" / "rasterize_fwd.wgsl").is_file():
@@ -87,10 +90,12 @@ def main() -> int:
         return public_steps(ctx, [(ShaderLibrary(d), {}) for d in dirs], scene, cam, args.rounds)
     surfels, upstream = pass_inputs(ctx, scene, cam)
     # Each directory gets its own shader library and pipeline cache; the context switches between them.
-    setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx)) for d in dirs]
-    if args.toggle:
-        for i, (_, _, rast) in enumerate(setups):
-            setattr(rast, args.toggle, bool(i))
+    try:
+        options = [toggled(ctx, args.toggle, on) for on in (False, True)] if args.toggle else [None, None]
+    except ValueError as e:   # a switch this adapter cannot turn on
+        print(f"--toggle {args.toggle}: {e}", file=sys.stderr)
+        return 2
+    setups = [(ShaderLibrary(d), {}, SurfelRasterizer(ctx, o)) for d, o in zip(dirs, options)]
     timer = PassTimer(ctx)
     times: list[list[dict]] = [[], []]
     sums: list[tuple] = [(), ()]
@@ -114,6 +119,20 @@ def main() -> int:
             print(f"{name:14s} {np.median(a):8.2f} {np.median(b):8.2f} {np.median(b / a):7.3f}")
     print(f"sums (colour, |d means|, |d colours|): A {sums[0]}\n{'':38s}B {sums[1]}")
     return 0
+
+
+SWITCHES = tuple(f.name for f in dataclasses.fields(RasterOptions) if f.type in (bool, "bool"))
+# Switched off with the switch they need.
+NEEDS = {"subgroups": ("tile_walk", "grad_records"), "tile_walk": ("grad_records",)}
+
+
+def toggled(ctx, name: str, on: bool) -> RasterOptions:
+    """The adapter's options with switch ``name`` set to ``on`` (off: also what needs it); ValueError when
+    the adapter cannot run that."""
+    changes = {name: on} if on else {name: False, **dict.fromkeys(NEEDS.get(name, ()), False)}
+    options = dataclasses.replace(RasterOptions.for_context(ctx), **changes)
+    options.check(ctx)
+    return options
 
 
 def public_steps(ctx, setups, scene: dict, cam, rounds: int) -> int:

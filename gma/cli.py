@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import sys
+import tempfile
 
 import gma.commands
 from gma.core.report import run_reporting_errors
@@ -26,7 +28,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def prepare_environment(environ=os.environ) -> None:
+    """The command's process environment, set up before any library runs (the library itself never
+    writes the environment). Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid" on every start
+    without a private runtime folder (containers, CI, cron): give them one when the session has none, one
+    per user and reused by every run (the Makefile's choice too), private as the XDG spec asks."""
+    current = environ.get("XDG_RUNTIME_DIR")
+    if current and os.path.isdir(current) and os.access(current, os.W_OK):
+        return
+    user = os.getuid() if hasattr(os, "getuid") else 0
+    folder = os.path.join(tempfile.gettempdir(), f"gma-xdg-{user}")
+    try:
+        os.makedirs(folder, mode=0o700, exist_ok=True)
+    except OSError:   # (a read-only temp folder: Mesa's warning is all that is lost)
+        return
+    environ["XDG_RUNTIME_DIR"] = folder
+
+
 def main(argv: list[str] | None = None) -> int:
+    prepare_environment()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -3,12 +3,17 @@
 # - a Vulkan driver: Mesa's lavapipe (CPU) when no Vulkan ICD is present, xvfb for window tests;
 # - torch pinned first, so that the CPU wheel is used instead of the multi-GB CUDA build;
 # - this package in editable mode, with the SMPL-X, viewer (Dear ImGui), cluster (Ray, for gma batch) and dev extras;
-# - on Debian 12, Mesa 25's lavapipe from bookworm-backports, on Debian 13 Mesa 26's from trixie-backports, in
-#   GMA's cache (`gma lavapipe install`: checked against Debian's signed index, the system's Mesa stays as it is;
-#   GMA_LAVAPIPE=system skips it).
+# - with LAVAPIPE=backports (opt-in: `make install LAVAPIPE=backports`), on Debian 12 Mesa 25's lavapipe from
+#   bookworm-backports, on Debian 13 Mesa 26's from trixie-backports, for this user beside the system's Mesa
+#   (scripts/lavapipe_backport.py: checked against Debian's signed index, listed in the Vulkan loader's per-user
+#   folder; `python3 scripts/lavapipe_backport.py remove` takes it out again).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
+case "${LAVAPIPE:-system}" in
+    system|backports) ;;
+    *) echo "[install] LAVAPIPE=${LAVAPIPE}: use system (the default) or backports" >&2; exit 2 ;;
+esac
 
 have_vulkan_icd() {
     local f
@@ -47,8 +52,13 @@ fi
 # Debian 12's own lavapipe (Mesa 22.3) and Debian 13's (Mesa 25.0) render markedly slower than their backports'
 # (docs/design.md); offline, the system's is used. As root, the few libraries the backport links against that
 # the system's Mesa did not pull in are installed too (Debian 13: libdisplay-info2).
-lavapipe_args=()
-[ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && lavapipe_args+=(--with-dependencies)
-if ! "$PY" -m gma.cli lavapipe install "${lavapipe_args[@]}"; then
-    echo "[install] keeping the system's lavapipe" >&2
+if [ "${LAVAPIPE:-system}" = backports ]; then
+    lavapipe_args=()
+    [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && lavapipe_args+=(--with-dependencies)
+    if ! "$PY" scripts/lavapipe_backport.py install "${lavapipe_args[@]}"; then
+        echo "[install] keeping the system's lavapipe" >&2
+    fi
+elif grep -qsE '^VERSION_CODENAME="?(bookworm|trixie)' /etc/os-release \
+        && [ ! -e "${XDG_DATA_HOME:-$HOME/.local/share}/vulkan/icd.d/gma_lavapipe_backport.json" ]; then
+    echo "[install] renders faster on lavapipe with the backports' Mesa: make install LAVAPIPE=backports (README, Environment)"
 fi

@@ -4,6 +4,12 @@ from __future__ import annotations
 
 import pytest
 
+from gma.cli import prepare_environment
+
+# The suite is an application of the library: like the gma command it gives Mesa a runtime folder
+# (gma/cli.py), before any test starts wgpu.
+prepare_environment()
+
 # Fixtures that hand out a GPU context: a test that takes one is a `gpu` test whether or not it says so.
 GPU_FIXTURES = {"gpu", "gpu_no_float_atomics", "small_body_source"}
 

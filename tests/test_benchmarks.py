@@ -130,17 +130,18 @@ def test_machine_line_names_the_processor_and_torchs_vector_width():
 
 @pytest.mark.gpu
 def test_shader_ab_toggles_a_rasterizer_switch():
-    """``shader_ab.py --toggle SWITCH`` times this checkout's shaders with a SurfelRasterizer switch off and
+    """``shader_ab.py --toggle SWITCH`` times this checkout's shaders with a RasterOptions switch off and
     on; directories beside it, or a name that is not a switch, get one line and exit 2."""
     def run(*args):
         return subprocess.run([sys.executable, str(BENCH / "shader_ab.py"), *args, "--rounds", "2", "--count",
                                "500"], cwd=REPO, capture_output=True, text=True, timeout=600,
                               env=dict(os.environ, PYTHONPATH=str(REPO)))
-    out = run("--toggle", "use_work_queues")
+    out = run("--toggle", "work_queues")
     assert out.returncode == 0, out.stderr[-3000:]
     assert "rasterize_bwd" in out.stdout and "B/A" in out.stdout
-    for args, message in ((("--toggle", "no_such_switch"), "not a switch of SurfelRasterizer"),
-                          (("--toggle", "use_work_queues", "shaders/wgsl", "shaders/wgsl"), "give two shader"),
+    for args, message in ((("--toggle", "no_such_switch"), "not a switch of RasterOptions"),
+                          (("--toggle", "queue_workgroups"), "not a switch of RasterOptions"),
+                          (("--toggle", "work_queues", "shaders/wgsl", "shaders/wgsl"), "give two shader"),
                           (("shaders/wgsl",), "give two shader")):
         bad = run(*args)
         assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr
@@ -162,7 +163,7 @@ def test_shader_ab_times_public_steps():
     sums = out.stdout.strip().splitlines()[-1]
     a, b = (part.split(",")[0].strip() for part in sums.split(": A ")[1].split("B "))
     assert a == b and float(a) > 0
-    for args, message in ((("--toggle", "use_work_queues"), "--public compares two shader directories"),
+    for args, message in ((("--toggle", "work_queues"), "--public compares two shader directories"),
                           (("shaders/wgsl", "shaders/wgsl", "--rounds", "1"), "--public needs at least 2")):
         bad = run(*args)
         assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr

@@ -177,8 +177,8 @@ def _front_camera(verts, size=96):
 
 def test_observe_faces_sees_the_front_not_the_back(anny_body, gpu):
     from gma.body.geometry import face_normals
-    from gma.render.face_id import FaceIdRenderer
     from gma.edit.unseen import SEEN, observe_faces, seen_score
+    from gma.render.face_id import FaceIdRenderer
 
     params = anny_body.canonical_params(None)
     verts = anny_body.rest_vertices(params)

@@ -33,7 +33,7 @@ def test_render_on_recycled_buffers_equals_fresh_buffers(gpu, monkeypatch):
     upstream = {"color": torch.from_numpy(rng.normal(size=(56, 72, 3)).astype(np.float32)),
                 "alpha": torch.from_numpy(rng.normal(size=(56, 72, 1)).astype(np.float32))}
     recycler = gpu.recycler
-    with monkeypatch.context() as m:   # recycling off (as GMA_RECYCLE=0): fresh, zero-filled buffers
+    with monkeypatch.context() as m:   # recycling off: fresh, zero-filled buffers
         m.setattr(recycler, "enabled", False)
         fresh_images, fresh_grads = _render_and_grads(gpu, scene, cam, upstream)
     _render_and_grads(gpu, other, cam, {k: -2 * v for k, v in upstream.items()})
@@ -81,9 +81,8 @@ def test_recycler_keeps_at_most_its_budget_and_matches_size_and_usage(gpu):
     assert recycler.free_bytes == 0
 
 
-def test_recycling_switched_off_by_environment(gpu, monkeypatch):
-    monkeypatch.setenv("GMA_RECYCLE", "0")
-    recycler = BufferRecycler(gpu)
+def test_recycling_switched_off(gpu):
+    recycler = BufferRecycler(gpu, enabled=False)
     first = recycler.take(1024, "a", STORAGE)
     recycler.give_back([first])
     assert recycler.free_bytes == 0
@@ -122,7 +121,7 @@ def test_stale_gradient_records_never_reach_the_sums(gpu, monkeypatch):
     from gma.render import api
 
     rast = api.rasterizer_for(gpu)
-    if not rast.use_grad_records:
+    if not rast.options.grad_records:
         return   # records are the lavapipe path; elsewhere the atomics' buffers are fresh per call
     cam = default_camera(64, 48)
     rng = np.random.default_rng(1)

@@ -13,13 +13,14 @@ and those within 5e-2 * max.
 from __future__ import annotations
 
 import gc
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import torch
 from render_helpers import assert_image_close, default_camera, special_surfels, torch_scene
 
-from gma.render import SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference, read_outputs
+from gma.render import RasterOptions, SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference, read_outputs
 from gma.render.gpu_sort import LANE_MAX_DIGIT_BITS
 from gma.render.reference import project_reference
 
@@ -45,12 +46,18 @@ def random_upstream(cam, channels=3, seed=0, which=("color", "alpha", "normal", 
             for k, c in shapes.items()}
 
 
-def gpu_grads(gpu, scene, cam, upstream, background=None, subgroups=None, float_atomics=True, records=True):
-    rast = SurfelRasterizer(gpu)
-    if subgroups is not None:
-        rast.use_subgroups = subgroups and rast.use_subgroups
-    rast.use_float_atomics = float_atomics
-    rast.use_grad_records = records and rast.use_grad_records
+def variant(gpu, subgroups=True, float_atomics=True, records=True) -> RasterOptions:
+    """The adapter's options with the subgroup rasterizers, float atomics or gradient records switched off
+    (each only where the adapter has it: the variants other adapters run)."""
+    best = RasterOptions.for_context(gpu)
+    if not subgroups:   # the plain rasterizers (GPUs): no tile walk, hence no records
+        best = replace(best, subgroups=False, tile_walk=False, grad_records=False)
+    return replace(best, float_atomics=float_atomics and best.float_atomics,
+                   grad_records=records and best.grad_records)
+
+
+def gpu_grads(gpu, scene, cam, upstream, background=None, subgroups=True, float_atomics=True, records=True):
+    rast = SurfelRasterizer(gpu, variant(gpu, subgroups, float_atomics, records))
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
     state = rast.forward(buffers, cam, background)
     g = rast.backward(state, buffers, upstream["color"], upstream["alpha"], upstream["normal"], upstream["depth"])
@@ -94,16 +101,16 @@ def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
     """On lavapipe the subgroup backward sums per-intersection records in a fixed order: the same
     gradients, bit for bit, on every run, and the atomics' sums up to float32 reordering. The images do
     not depend on whether the forward kept the record index (its keys carry more than the tile)."""
-    rast = SurfelRasterizer(gpu)
-    if not rast.use_grad_records:
+    if not RasterOptions.for_context(gpu).grad_records:
         pytest.skip("gradient records need lavapipe's subgroup rasterizer")
     scene = torch_scene(3000, seed=21, spread=0.6, scale_range=(0.02, 0.15))
     cam = default_camera(96, 80)
     up = random_upstream(cam, seed=7, which=which)
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+    rasterizers = {records: SurfelRasterizer(gpu, variant(gpu, records=records)) for records in (True, False)}
 
     def run(records, one_pass_sort=True):
-        rast.use_grad_records = records
+        rast = rasterizers[records]
         # Records lie at emission indices, which the keys carry through any tile sort: here the
         # sort is also made to take several passes (lavapipe's lane sort takes one).
         rast.sorter.max_digit_bits = LANE_MAX_DIGIT_BITS if one_pass_sort else 3
@@ -114,7 +121,7 @@ def test_gradient_records_reproducible_and_equal_to_atomics(gpu, which):
         return images, {k: getattr(g, k) for k in NAMES}
 
     images, first = run(True)
-    num_isects = rast.forward(buffers, cam).num_isects
+    num_isects = rasterizers[True].forward(buffers, cam).num_isects
     assert num_isects > 3 * 3000 // 2, "the scene should spread surfels over several tiles each"
     for one_pass_sort in (True, False, True):
         _, again = run(True, one_pass_sort)
@@ -134,7 +141,7 @@ def test_surfel_texels_change_nothing(gpu):
     for bit, over several texture rows (5000
     surfels: 4.9 rows of projections, 1.2 of colours) and after the textures grew for a larger scene."""
     rast = SurfelRasterizer(gpu)
-    if not rast.use_grad_records:
+    if not rast.options.grad_records:
         pytest.skip("the surfel textures serve lavapipe's tile walks")
     cam = default_camera(80, 64)
     for n in (5000, 700):
@@ -142,16 +149,16 @@ def test_surfel_texels_change_nothing(gpu):
         up = random_upstream(cam, seed=3, which=("color", "normal"))
         buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
         results = []
-        # Buffers; textures; textures too small for these surfels and records (the buffers then).
-        for texels, capacity, max_texels in ((False, None, None), (True, None, None), (True, 4096, 1 << 14)):
-            rast.use_surfel_texels = texels
-            if capacity:
+        # Buffers (textures that hold nothing); textures; textures too small for these surfels and records
+        # (the buffers then).
+        for capacity, max_texels in ((0, 0), (None, None), (4096, 1 << 14)):
+            rast.texels = type(rast.texels)(gpu)   # the true capacities
+            if capacity is not None:
                 rast.texels.capacity, rast.texels.max_texels = capacity, max_texels
             state = rast.forward(buffers, cam)
             images = read_outputs(gpu, state)
             g = rast.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"])
             results.append((images, g))
-        rast.texels = type(rast.texels)(gpu)   # the true capacities again
         (images_a, grads_a), *others = results
         for images_b, grads_b in others:
             for k in ("color", "alpha", "normal", "depth"):
@@ -161,46 +168,35 @@ def test_surfel_texels_change_nothing(gpu):
         assert np.abs(grads_a.means).sum() > 0
 
 
-def test_walk_layout_changes_nothing_and_the_backward_reads_its_forwards(gpu):
+def test_a_backward_reads_the_layout_its_forward_wrote(gpu):
     """With the tile walk, projection writes the walks' layout (each surfel's colour beside its T rows, the
-    normal and depth apart: surfel_texels.wgsl): images and gradients bit for bit those of the standard
-    layout. The backward reads the layout its forward wrote: the same gradients when the tile walk and
-    the layout are switched off between the two, and, to float rounding (atomics instead of records),
-    from the per-subgroup backward that a render without gradient records takes."""
-    if not SurfelRasterizer(gpu).use_grad_records:
+    normal and depth apart: surfel_texels.wgsl). A forward state records the variant it was rendered with,
+    and a backward run by a rasterizer of other options reads it as written: the same gradients as its own
+    rasterizer's."""
+    if not RasterOptions.for_context(gpu).grad_records:
         pytest.skip("the walks' layout serves lavapipe's tile walks")
     cam = default_camera(72, 56)
     scene = torch_scene(1800, seed=21, spread=0.8, scale_range=(0.02, 0.15))
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
+    walked = SurfelRasterizer(gpu)
+    per_subgroup = SurfelRasterizer(gpu, replace(walked.options, tile_walk=False, grad_records=False))
     for which in (("color",), ("color", "normal", "depth")):   # without and with normal/depth gradients
         up = random_upstream(cam, seed=8, which=which)
-        grads, images = [], []
-        for layout, switch_off, records in ((True, False, True), (False, False, True), (True, True, True),
-                                            (True, False, False)):
-            rast = SurfelRasterizer(gpu)
-            rast.use_grad_records, rast.use_walk_layout = records, layout
-            state = rast.forward(buffers, cam)
-            assert state.proj.walk_layout == layout and (state.records is not None) == records
-            images.append(read_outputs(gpu, state))
-            rast.use_tile_walk = rast.use_walk_layout = not switch_off
-            grads.append(rast.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"]))
-        walked, standard, switched, per_subgroup = grads
-        for k in ("color", "alpha", "normal", "depth"):
-            assert np.array_equal(getattr(images[0], k), getattr(images[1], k)), (which, k)
+        state = walked.forward(buffers, cam)
+        assert state.proj.walk_layout and state.records is not None
+        own = walked.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"])
+        other = per_subgroup.backward(state, buffers, up["color"], up["alpha"], up["normal"], up["depth"])
         for k in NAMES:
-            assert np.array_equal(getattr(walked, k), getattr(standard, k)), (which, k)
-            assert np.array_equal(getattr(walked, k), getattr(switched, k)), (which, k)
-            # As records against atomics in test_gradient_records_reproducible_and_equal_to_atomics.
-            scale = float(np.abs(getattr(walked, k)).max())
-            assert np.abs(getattr(per_subgroup, k) - getattr(walked, k)).max() <= 1e-5 * scale, (which, k)
-        assert np.abs(walked.colors).sum() > 0 and np.abs(walked.means).sum() > 0
+            assert np.array_equal(getattr(own, k), getattr(other, k)), (which, k)
+        assert np.abs(own.colors).sum() > 0 and np.abs(own.means).sum() > 0
 
 
 def test_work_queues_give_the_same_results_whatever_their_workgroup_count(gpu):
     """On lavapipe projection, emission, the tile walks and project_bwd take their work from a queue, one
     workgroup per driver thread (common/work_queue.wgsl): any workgroup count, including more than there
     are tiles, gives bit for bit the images and gradients of one workgroup per tile and per 256 surfels."""
-    if not SurfelRasterizer(gpu).use_grad_records:
+    best = RasterOptions.for_context(gpu)
+    if not best.grad_records:
         pytest.skip("the work queues serve lavapipe")
     cam = default_camera(88, 72)   # 6 x 5 tiles
     scene = torch_scene(1500, seed=33, spread=0.8, scale_range=(0.02, 0.15))
@@ -208,9 +204,8 @@ def test_work_queues_give_the_same_results_whatever_their_workgroup_count(gpu):
     up = random_upstream(cam, seed=4, which=("color", "alpha"))
     results = []
     for queued, workgroups in ((False, 1), (True, 1), (True, 2), (True, 5), (True, 64)):
-        rast = SurfelRasterizer(gpu)
-        assert rast.use_work_queues
-        rast.use_work_queues, rast.queue_workgroups = queued, workgroups
+        assert best.work_queues
+        rast = SurfelRasterizer(gpu, replace(best, work_queues=queued, queue_workgroups=workgroups))
         state = rast.forward(buffers, cam)
         results.append((read_outputs(gpu, state),
                         rast.backward(state, buffers, up["color"], up["alpha"], None, None)))
@@ -240,7 +235,7 @@ def test_interleaved_renders_keep_their_own_texels(gpu):
     alone = [grads(rast.forward(b, cam), b) for b in buffers]
     first, second = rast.forward(buffers[0], cam), rast.forward(buffers[1], cam)
     rast.forward(buffers[1], cam, replay=False)   # a viewer-style render in between
-    if rast.use_grad_records:
+    if rast.options.grad_records:
         assert first.texel_lease is not None and first.texel_lease is not second.texel_lease
     for got, want in ((grads(second, buffers[1]), alone[1]), (grads(first, buffers[0]), alone[0])):
         for name, a, b in zip(NAMES, got, want):
@@ -249,7 +244,7 @@ def test_interleaved_renders_keep_their_own_texels(gpu):
     del first, second
     gc.collect()
     again = rast.forward(buffers[0], cam)
-    if rast.use_grad_records:   # a given-back lease serves it
+    if rast.options.grad_records:   # a given-back lease serves it
         assert any(again.texel_lease is held for held in leased)
     for name, a, b in zip(NAMES, grads(again, buffers[0]), alone[0]):
         assert np.array_equal(a, b), name
@@ -259,7 +254,7 @@ def test_gradient_records_only_where_they_fit(gpu):
     """Records need a tile id below the key's number field and a buffer binding that holds them; a
     render beyond either (or with more than 4 channels: the plain rasterizer) falls back to atomics."""
     rast = SurfelRasterizer(gpu)
-    if not rast.use_grad_records:
+    if not rast.options.grad_records:
         pytest.skip("gradient records need lavapipe's subgroup rasterizer")
     assert rast._records_for(default_camera(512, 512), 3, 224_000)
     assert rast._records_for(default_camera(4112, 64), 3, 1000)   # 257 x 4 tiles
@@ -317,8 +312,7 @@ def test_surfels_whose_conic_centre_lies_far_outside_the_image(gpu, subgroups):
     assert bool(valid.all()) and int(far.sum()) == 4 and float(mu2d.abs().max()) > 5e4, mu2d
     ref = rasterize_reference(*t, view, K, cam.width, cam.height)
     assert float((ref["alpha"] > 0.1).double().mean()) > 0.5   # the surfels cover the image
-    rast = SurfelRasterizer(gpu)
-    rast.use_subgroups = subgroups and rast.use_subgroups
+    rast = SurfelRasterizer(gpu, variant(gpu, subgroups))
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in NAMES))
     out = read_outputs(gpu, rast.forward(buffers, cam))
     assert_image_close("color", out.color, ref["color"].numpy())

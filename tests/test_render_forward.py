@@ -2,14 +2,28 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
 from render_helpers import assert_image_close, default_camera, special_surfels, torch_scene
 
-from gma.render import SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference
+from gma.render import RasterOptions, SurfelBuffers, SurfelRasterizer, rasterize, rasterize_reference
 
 pytestmark = pytest.mark.gpu
+
+
+def subgroup_variant(gpu, subgroups: bool) -> RasterOptions:
+    """The adapter's options with the subgroup rasterizers (CPU adapters; the tile walk with 8 lanes) or the
+    plain ones (GPUs); skips where the adapter's subgroups cannot run them."""
+    best = RasterOptions.for_context(gpu)
+    if not subgroups:
+        return replace(best, subgroups=False, tile_walk=False, grad_records=False)
+    if not (gpu.has_subgroups and 1 <= gpu.subgroup_size <= 32):
+        pytest.skip("adapter has no subgroups the rasterizers can use")
+    tile_walk = gpu.subgroup_size == 8
+    return replace(best, subgroups=True, tile_walk=tile_walk, grad_records=tile_walk and best.grad_records)
 
 
 def render_both(scene, camera, background=None, ctx=None):
@@ -128,7 +142,8 @@ def test_tile_walk_matches_the_per_subgroup_variant_bit_for_bit(gpu, case):
 
     from gma.render import read_outputs
 
-    if not gpu.has_subgroups or gpu.subgroup_size != 8 or not SurfelRasterizer(gpu).use_subgroups:
+    best = RasterOptions.for_context(gpu)
+    if not best.tile_walk:
         pytest.skip("the tile walk needs the subgroup rasterizer with 8 lanes")
     if case == "deep":
         scene = torch_scene(2500, seed=4, scale_range=(0.05, 0.3), spread=0.4)
@@ -142,8 +157,7 @@ def test_tile_walk_matches_the_per_subgroup_variant_bit_for_bit(gpu, case):
     bg = gpu.upload(np.array([0.2, 0.4, 0.6], np.float32), "bg")
     results = []
     for walk in (False, True):
-        rast = SurfelRasterizer(gpu)
-        rast.use_tile_walk = walk
+        rast = SurfelRasterizer(gpu, replace(best, tile_walk=walk, grad_records=walk and best.grad_records))
         assert rast.raster_defines(3)["TILE_WALK"] == walk
         images = [read_outputs(gpu, rast.forward(buffers, cam, replay=replay)) for replay in (True, False)]
         texture = gpu.device.create_texture(
@@ -172,10 +186,9 @@ def test_plain_and_subgroup_variants_agree(gpu):
     arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
     outs = []
     for use in (False, True):
-        if use and not gpu.has_subgroups:
-            pytest.skip("adapter has no subgroups")
-        rast = SurfelRasterizer(gpu)
-        rast.use_subgroups = use
+        if use and not (gpu.has_subgroups and 1 <= gpu.subgroup_size <= 32):
+            pytest.skip("adapter has no subgroups the rasterizers can use")
+        rast = SurfelRasterizer(gpu, subgroup_variant(gpu, use))
         from gma.render import read_outputs
 
         st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
@@ -199,8 +212,7 @@ def test_intersection_block_bits_cover_every_reached_block(gpu):
     more = torch_scene(300, seed=5)
     scene = {k: torch.cat([scene[k], more[k]]) for k in scene}
     cam = default_camera(80, 56)
-    rast = SurfelRasterizer(gpu)
-    rast.use_subgroups = True
+    rast = SurfelRasterizer(gpu, subgroup_variant(gpu, True))
     arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
     st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
     tx, ty = tile_grid(cam.width, cam.height)
@@ -242,8 +254,7 @@ def test_projection_stats_variants_agree(gpu):
     arrays = [scene[k].numpy() for k in ("means", "quats", "scales", "opacities", "colors")]
     results = []
     for use in (False, True):
-        rast = SurfelRasterizer(gpu)
-        rast.project_subgroups = use
+        rast = SurfelRasterizer(gpu, replace(RasterOptions.for_context(gpu), project_subgroups=use))
         st = rast.forward(SurfelBuffers.from_arrays(gpu, *arrays), cam)
         stats = gpu.read(st.proj.stats, np.uint32, 4)
         counts = gpu.read(st.proj.tile_counts, np.uint32, 3000)
@@ -262,8 +273,7 @@ def test_render_only_forward_matches_the_replayable_one(gpu, subgroups):
         pytest.skip("adapter has no subgroups")
     scene = torch_scene(2000, seed=5)
     cam = default_camera(80, 64)
-    rast = SurfelRasterizer(gpu)
-    rast.use_subgroups = subgroups and rast.use_subgroups
+    rast = SurfelRasterizer(gpu, subgroup_variant(gpu, subgroups))
     buffers = SurfelBuffers.from_arrays(gpu, *(scene[k].numpy() for k in ("means", "quats", "scales", "opacities",
                                                                            "colors")))
     kept = read_outputs(gpu, rast.forward(buffers, cam, np.array([0.2, 0.3, 0.4], np.float32)))

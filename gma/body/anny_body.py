@@ -6,9 +6,9 @@ Anny is Z-up, faces −Y, metres. Pose parameters are Anny's ``local-ref`` delta
 (bone 0 is the root and carries the global rotation and translation). Identity everywhere is Anny's rest
 pose — an A-pose with the root at the origin — which is also the canonical pose for editing.
 
-Creating the model is slow the first time: anny builds a ~1 GB cache under ``$ANNY_CACHE_DIR`` (by
-default ``~/.cache/gma/anny``, whichever way GMA is started), ~75 s; later creations read that cache
-(~3 s), and within one process ``AnnyBody.create()`` returns the same object. Per frame, only forward
+Creating the model is slow the first time: anny builds a large cache (``AnnyBody.create``'s
+``cache_dir``; by default ``$ANNY_CACHE_DIR``, else ``~/.cache/gma/anny``); later creations read that
+cache, and within one process ``AnnyBody.create()`` returns the same object. Per frame, only forward
 kinematics runs (rest vertices and rest bone poses are cached for the last shape/expression).
 """
 
@@ -54,10 +54,13 @@ def _anny_face_labels(model, faces: torch.Tensor) -> tuple[tuple[str, ...], torc
 DEFAULT_ANNY_CACHE_DIR = Path.home() / ".cache" / "gma" / "anny"
 
 
-def _prepare_anny_import() -> None:
-    """Before anny is first imported: point its cache at GMA's default (anny reads the variable at import)
-    and quieten NVIDIA Warp, which anny imports and which prints a CUDA banner GMA has no use for."""
-    os.environ.setdefault("ANNY_CACHE_DIR", str(DEFAULT_ANNY_CACHE_DIR))
+def anny_cache_dir(cache_dir: str | Path | None = None) -> Path:
+    """Where anny keeps its cache: ``cache_dir``, else anny's own ``$ANNY_CACHE_DIR``, else GMA's default."""
+    return Path(cache_dir or os.environ.get("ANNY_CACHE_DIR") or DEFAULT_ANNY_CACHE_DIR)
+
+
+def _quiet_warp() -> None:
+    """Quieten NVIDIA Warp, which anny imports and which prints a CUDA banner GMA has no use for."""
     try:
         import warp
     except ImportError:  # anny without its optional Warp skinning
@@ -66,9 +69,14 @@ def _prepare_anny_import() -> None:
 
 
 @functools.lru_cache(maxsize=4)
-def _create(rig: str, topology: str) -> AnnyBody:
-    _prepare_anny_import()
+def _create(rig: str, topology: str, cache_dir: Path) -> AnnyBody:
+    _quiet_warp()
     import anny
+    from anny.paths import set_anny_cache_path
+
+    # anny reads its cache folder when it builds or loads the model, through its own setting (which its
+    # import took from $ANNY_CACHE_DIR): GMA passes its choice there rather than through the environment.
+    set_anny_cache_path(cache_dir)
 
     model = anny.Anny(
         rig=rig,
@@ -87,9 +95,10 @@ class AnnyBody(BodyModel):
     underlying ``anny.Anny`` module (float32) for anything this wrapper does not expose."""
 
     @staticmethod
-    def create(rig: str = "anny", topology: str = "anny") -> AnnyBody:
-        """The default Anny body (one instance per (rig, topology) per process)."""
-        return _create(rig, topology)
+    def create(rig: str = "anny", topology: str = "anny", cache_dir: str | Path | None = None) -> AnnyBody:
+        """The default Anny body (one instance per (rig, topology, cache folder) per process); anny's
+        cache in ``cache_dir`` (default: :func:`anny_cache_dir`)."""
+        return _create(rig, topology, anny_cache_dir(cache_dir))
 
     def __init__(self, model):
         self.anny_model = model

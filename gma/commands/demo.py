@@ -39,10 +39,12 @@ def run(args: argparse.Namespace) -> int:
     from gma.avatar.video import orbit_cameras, render_turntable, sequence_camera, write_video
     from gma.body import load_body, motion
     from gma.commands._demo_edit import edit_stage
+    from gma.commands._openmp_workers import openmp_workers_asleep
     from gma.core.atomic import atomic_write_bytes, atomic_write_json
     from gma.data import read_sequence
     from gma.edit.unseen import AfterFit
     from gma.gpu import get_context
+    from gma.render.api import around_device_work
     from gma.render.image_io import save_png
     from gma.synth.generate import SynthConfig, synthesize
     from gma.train.config import preset
@@ -71,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = preset(args.preset, seed=args.seed)
     avatar_path = out / "avatar.gma"
     trainer = Trainer(cfg, seq, avatar_path, body=body, ctx=ctx, finish=AfterFit(ctx))
-    avatar = trainer.run(resume=True)
+    with around_device_work(openmp_workers_asleep):   # (as gma fit: see _openmp_workers.py)
+        avatar = trainer.run(resume=True)
     times["fit_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -38,9 +38,11 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from gma.commands._openmp_workers import openmp_workers_asleep
     from gma.commands._options import collect_overrides
     from gma.data import read_sequence
     from gma.edit.unseen import AfterFit
+    from gma.render.api import around_device_work
     from gma.train.config import preset
     from gma.train.outputs import prepare_fit_outputs
     from gma.train.trainer import Trainer, refined_body_path, work_dir
@@ -52,7 +54,8 @@ def run(args: argparse.Namespace) -> int:
     prepare_fit_outputs(args.output, args.sequence, args.resume, args.force)  # before reading any image
     seqs = [read_sequence(s) for s in args.sequence]
     trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet, finish=AfterFit())
-    avatar = trainer.run(resume=args.resume)
+    with around_device_work(openmp_workers_asleep):   # (the command's choice: see _openmp_workers.py)
+        avatar = trainer.run(resume=args.resume)
     written = ", ".join(str(s.out) for s in trainer.subjects)
     if len(seqs) > 1:
         written += f" and the shared decoders {trainer.out / 'decoders.gma'}"

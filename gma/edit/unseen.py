@@ -166,8 +166,8 @@ class AfterFit:
 
     def _renderer_for(self, body):
         if self._renderer is None or self._renderer.num_faces != body.num_faces:
-            from gma.render.face_id import FaceIdRenderer
             from gma.gpu import get_context
+            from gma.render.face_id import FaceIdRenderer
 
             self.ctx = self.ctx or get_context()
             self._renderer = FaceIdRenderer(self.ctx, body.faces.numpy())
@@ -193,9 +193,9 @@ def seen_picture(avatar, body, ctx=None, size: int = 256) -> np.ndarray:
     left and right, each face coloured by its seen score (green seen, magenta guessed), lit by its
     facing, on white. EditError for an avatar without the record."""
     from gma.avatar.posing import face_away_cosine
-    from gma.render.face_id import FaceIdRenderer
     from gma.edit.views import NAMED_VIEWS, canonical_vertices, named_view
     from gma.gpu import get_context
+    from gma.render.face_id import FaceIdRenderer
 
     unseen_mask(avatar)  # the error for an avatar without the record
     verts = canonical_vertices(body, avatar.model.vertex_offsets(), avatar.shape)

@@ -2,19 +2,20 @@
 
 ``GMA_ADAPTER`` forces the choice: ``gpu`` (any hardware adapter), ``cpu`` (a software adapter such as
 lavapipe), or any other text, matched case-insensitively against the adapter's device/vendor name.
-Among software adapters the newest Mesa wins: on Debian 12 that is the lavapipe ``scripts/install.sh``
-keeps in GMA's cache (:mod:`gma.gpu.lavapipe`) rather than the system's older one.
+Which drivers exist is the Vulkan loader's business (its ``VK_DRIVER_FILES`` / ``VK_ADD_DRIVER_FILES``
+and its search folders); GMA changes nothing there. Among software adapters the newest Mesa wins: where a
+user installed a newer lavapipe beside the system's (``scripts/lavapipe_backport.py`` on Debian 12 and
+13), that one. :func:`describe` names the driver an adapter runs.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
+import re
 
 import wgpu
 
 from gma.core.errors import DeviceError
-from gma.gpu.lavapipe import mesa_version, register
 
 # Explicit graphics APIs beat the GL compatibility path, which lacks storage buffers in many places.
 _BACKEND_RANK = {"Vulkan": 0, "Metal": 0, "D3D12": 0, "DX12": 0, "OpenGL": 2, "GL": 2}
@@ -30,6 +31,13 @@ INSTALL_HINT = (
 
 class NoAdapterError(DeviceError):
     """Raised when no adapter matches; the message says how to install a driver."""
+
+
+def mesa_version(description: str) -> tuple[int, ...]:
+    """``(25, 0, 7)`` from an adapter description such as ``Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)`` (also
+    the GL adapter's ``4.5 (Core Profile) Mesa 25.0.7``); ``()`` for a driver that is not Mesa."""
+    match = re.search(r"Mesa\s+(\d+)\.(\d+)(?:\.(\d+))?", description)
+    return tuple(int(g) for g in match.groups() if g is not None) if match else ()
 
 
 def describe(adapter: wgpu.GPUAdapter) -> str:
@@ -61,24 +69,9 @@ def _matches(adapter: wgpu.GPUAdapter, wanted: str) -> bool:
     return wanted in text.lower()
 
 
-def _runtime_dir() -> None:
-    """Mesa's Vulkan drivers print "XDG_RUNTIME_DIR is invalid" on every start without a private runtime
-    folder (containers, CI, cron); give them one when the session has none."""
-    current = os.environ.get("XDG_RUNTIME_DIR")
-    if current and os.path.isdir(current) and os.access(current, os.W_OK):
-        return
-    # One folder per user, reused by every run (the Makefile's choice too), private as the spec asks.
-    user = os.getuid() if hasattr(os, "getuid") else 0
-    folder = os.path.join(tempfile.gettempdir(), f"gma-xdg-{user}")
-    os.makedirs(folder, mode=0o700, exist_ok=True)
-    os.environ["XDG_RUNTIME_DIR"] = folder
-
-
 def select_adapter(preference: str | None = None) -> wgpu.GPUAdapter:
     """Return the best adapter, honouring ``preference`` (default: ``$GMA_ADAPTER`` or ``auto``)."""
     wanted = (preference or os.environ.get("GMA_ADAPTER") or "auto").strip().lower()
-    _runtime_dir()
-    register()  # the cached newer lavapipe, if any (before wgpu starts the Vulkan loader)
     adapters = list(wgpu.gpu.enumerate_adapters_sync())
     if wanted != "auto":
         adapters = [a for a in adapters if _matches(a, wanted)]

@@ -1,7 +1,7 @@
 """Bind groups made once and reused while their buffers (and texture views) live.
 
-Creating a bind group costs wgpu-native ~0.15 ms of validation and Python struct building; the public
-``rasterize`` call made ~29 per forward+backward step (standard scene, lavapipe: ~4 ms of a ~180 ms step).
+Creating a bind group costs wgpu-native validation and Python struct building, and the public
+``rasterize`` call binds a few dozen groups per forward+backward step.
 With recycled buffers (gma/gpu/recycle.py) a steady loop binds the same buffers to the same pipelines
 step after step, so a bind group is looked up by (pipeline, group, every binding's buffer, offset and
 size) instead of being made again. A texture view is keyed like a buffer (offset and size 0): the

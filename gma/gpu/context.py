@@ -79,7 +79,7 @@ class GpuContext:
         adapter = select_adapter(preference)
         wanted = [f for f in OPTIONAL_FEATURES if f in adapter.features and f not in disable_features]
         if (adapter.info.get("adapter_type") == "CPU" and IN_PLACE_READS in adapter.features
-                and IN_PLACE_READS not in disable_features and os.environ.get("GMA_IN_PLACE_READS", "1") != "0"):
+                and IN_PLACE_READS not in disable_features):
             wanted.append(IN_PLACE_READS)
         limits = {k: adapter.limits[k] for k in RAISED_LIMITS if k in adapter.limits}
         device = adapter.request_device_sync(
@@ -260,7 +260,7 @@ class GpuContext:
         """A buffer holding ``array``'s bytes that nobody writes again, shared by every caller asking for
         the same bytes and usage. Small per-call values (a scan's count, a render's background) then bind
         the same buffer call after call, so their bind groups are found in the cache instead of made again
-        (wgpu-native: ~0.15 ms each), and no buffer is created or uploaded. Callers must never write to
+        (gma/gpu/bind_groups.py), and no buffer is created or uploaded. Callers must never write to
         it. At most CONSTANT_CACHE_ENTRIES (least recently used go) of up to 4 KiB each."""
         data = np.ascontiguousarray(array)
         if data.nbytes > 4096:
@@ -306,8 +306,8 @@ class GpuContext:
         if self.transfers.wait_for_compute:   # so that the transfer timing counts the copy, not the compute
             self.wait_idle()
         with _staging_lock, self.transfers.download(total):
-            # Kept and reused up to 64 MiB: a fresh multi-megabyte staging buffer per read costs lavapipe
-            # an allocation, its page faults and wgpu's zero-fill.
+            # Kept and reused up to STAGING_KEEP_BYTES: a fresh multi-megabyte staging buffer per read costs
+            # lavapipe an allocation, its page faults and wgpu's zero-fill.
             staging = getattr(self, "_staging", None)
             if staging is None or staging.size < total:
                 staging = self.device.create_buffer(label="read_many", size=total,
@@ -343,11 +343,9 @@ _copy_pool: ThreadPoolExecutor | None = None
 
 
 def _copy_out(mapped: np.ndarray) -> np.ndarray:
-    """A copy of ``mapped`` in reused host memory (gma/gpu/host_memory.py: fresh pages cost a fault each,
-    6.5 ms for the standard scene's images); a large one in two halves, one on a helper thread (numpy
-    releases the GIL while copying). The device idles while the host copies a read back out of the
-    mapping, so the second core is free: standard scene on lavapipe, 8.4 MB of images 0.70 -> 0.45 ms in
-    isolation."""
+    """A copy of ``mapped`` in reused host memory (gma/gpu/host_memory.py: fresh pages cost a fault
+    each); a large one in two halves, one on a helper thread (numpy releases the GIL while copying). The
+    device idles while the host copies a read back out of the mapping, so a second core is free."""
     global _copy_pool
     out = HOST_MEMORY.take(mapped.nbytes)
     if mapped.nbytes < PARALLEL_COPY_BYTES or (os.cpu_count() or 1) < 2:

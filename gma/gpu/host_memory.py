@@ -1,10 +1,9 @@
 """Host memory for read-backs, reused once the arrays made from it are gone.
 
 Every read-back needs fresh host memory: the arrays become the caller's tensors (images, gradients) and
-live on after the call. Fresh memory costs a page fault at the first touch of every 4 KB page, and on
-this project's 2-core VMs a fault took ~3 us: copying the standard scene's 8.4 MB of images out of the
-staging mapping took 6.5 ms into fresh pages against 0.4 ms into pages touched before (2,049 faults),
-the 5.2 MB of gradients 4.0 ms against 0.2 (public forward+backward step on lavapipe). A training loop
+live on after the call. Fresh memory costs a page fault at the first touch of every 4 KB page, which
+makes a copy of megabytes of images into fresh pages many times slower than into pages touched before
+(docs/design.md). A training loop
 drops the previous step's outputs before or while it makes the next ones, so the same few regions serve
 every step once their arrays are collected.
 

@@ -3,11 +3,10 @@ arrays that are the mapping itself until they are collected.
 
 A read-back through a staging buffer copies twice: the driver copies the output buffer into the staging
 buffer (on lavapipe's one queue thread, after the last pass), and the host copies the mapping out into
-arrays that outlive it. For the public render's images (8.4 MB on the standard scene) that was 1.50 ms
-from the last pass to the mapping and 0.78 ms of copying, for its gradients (5.2 MB) 0.92 and 0.55 ms, of a
-~84 ms forward+backward step. With wgpu's ``mappable-primary-buffers`` feature (native, requested on CPU
-adapters only, where every buffer is host memory anyway) a storage buffer may also be mapped: the passes
-write their outputs into ranges of one such buffer (one map per read: each map cost ~0.15 ms), and the
+arrays that outlive it; for the public render's images and gradients both copies lie on the critical path
+of every step. With wgpu's ``mappable-primary-buffers`` feature (native, requested on CPU adapters only,
+where every buffer is host memory anyway) a storage buffer may also be mapped: the passes write their
+outputs into ranges of one such buffer (one map per read, since each map has a fixed cost), and the
 arrays returned are views of its mapping.
 
 A buffer stays mapped, and out of the GPU's reach, while any array made from it lives: each read is a
@@ -44,7 +43,7 @@ class MappedReads:
 
     def take(self, nbytes: int, label: str, reuse: bool = True) -> wgpu.GPUBuffer:
         """An unmapped buffer of at least ``nbytes`` for passes to write and :meth:`read` to return (its
-        contents undefined); ``reuse=False`` makes a fresh one (as the recycler's switch, GMA_RECYCLE=0)."""
+        contents undefined); ``reuse=False`` makes a fresh one (as a recycler switched off does)."""
         size = max(GRANULE, -(-int(nbytes) // GRANULE) * GRANULE)
         with self._lock:
             self._file_returned()

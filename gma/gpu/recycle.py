@@ -2,9 +2,9 @@
 kept state, its uploaded surfels, its gradients), so that a loop of renders stops allocating.
 
 A fresh multi-megabyte buffer is expensive on a CPU adapter: lavapipe maps new memory, every page faults
-on first touch, and wgpu zero-fills whatever a pass reads before anything wrote it. The public
-``gma.render.rasterize`` call made ~40 MB of such buffers per forward+backward step at 100k surfels
-(standard scene, lavapipe: see docs/design.md for what recycling saves, a few per cent).
+on first touch, and wgpu zero-fills whatever a pass reads before anything wrote it; the public
+``gma.render.rasterize`` call needs tens of megabytes of such buffers per forward+backward step of a large
+scene (docs/design.md says what recycling saves).
 
 The owner's buffers come back when the owner is garbage-collected (:meth:`BufferRecycler.release_with`),
 and a later ``take`` of the same size and usage hands them out again. WebGPU runs submissions in order,
@@ -15,7 +15,6 @@ buffer holds stale data: only buffers that the GPU fully writes before it reads 
 
 from __future__ import annotations
 
-import os
 import threading
 import weakref
 from collections import OrderedDict
@@ -26,7 +25,7 @@ RECYCLE_KEEP_BYTES = 256 << 20  # released buffers kept for reuse, at most (the 
 
 
 class BufferRecycler:
-    def __init__(self, ctx, keep_bytes: int = RECYCLE_KEEP_BYTES):
+    def __init__(self, ctx, keep_bytes: int = RECYCLE_KEEP_BYTES, enabled: bool = True):
         self.ctx = ctx
         self.keep_bytes = keep_bytes
         self._free: OrderedDict[int, tuple[tuple[int, int], wgpu.GPUBuffer]] = OrderedDict()  # by id, oldest first
@@ -37,9 +36,8 @@ class BufferRecycler:
         # (list.append takes no lock) and the next call under the lock lists them.
         self._released: list[tuple[wgpu.GPUBuffer, ...]] = []
         self.reused = 0  # buffers handed out again (tests and benchmarks read it)
-        # GMA_RECYCLE=0: every take allocates (to rule recycling out, or to time it:
-        # `peer_compare.py --baseline . --baseline-env GMA_RECYCLE=0`).
-        self.enabled = os.environ.get("GMA_RECYCLE", "1").strip() != "0"
+        # Off: every take allocates (tests compare against fresh, zero-filled buffers).
+        self.enabled = enabled
 
     def take(self, nbytes: int, label: str, usage: int) -> wgpu.GPUBuffer:
         """A released buffer of exactly this (rounded) size and usage, stale contents and all, or a new one

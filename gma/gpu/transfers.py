@@ -15,8 +15,8 @@ class TransferStats:
     Download time includes waiting for the compute queued before the read, unless ``wait_for_compute``
     is set: then ``GpuContext.read_many`` first waits for that work outside the timing, so that its
     download time is the copy and map alone. That wait is one more round trip to the device (a fence
-    read: 1-3 % of a public forward+backward step on lavapipe, standard scene), so only benchmarks that
-    report transfer times set it; ``GpuContext.read`` always includes the wait."""
+    read), so only benchmarks that report transfer times set it; ``GpuContext.read`` always includes the
+    wait."""
 
     bytes_up: int = 0
     bytes_down: int = 0

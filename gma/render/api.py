@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 
 import numpy as np
@@ -9,7 +12,6 @@ import torch
 
 from gma.core.camera import Camera
 from gma.gpu import GpuContext, get_context
-from gma.gpu.openmp_workers import openmp_workers_asleep
 from gma.render.rasterizer import SurfelRasterizer, read_outputs
 from gma.render.surfels import SurfelBuffers
 from gma.render.validate import check_background, check_camera, check_surfel_values, check_surfels, host_array
@@ -26,6 +28,27 @@ class RenderOutput:
 
 
 _rasterizers: dict[int, SurfelRasterizer] = {}
+# What the public call enters around its GPU work (see around_device_work); None: nothing.
+_device_work_hook: Callable[[bool], AbstractContextManager] | None = None
+
+
+@contextlib.contextmanager
+def around_device_work(hook: Callable[[bool], AbstractContextManager] | None) -> Iterator[None]:
+    """While the block runs, every :func:`rasterize` call (its forward and its backward) runs its GPU work
+    inside ``hook(is_software)``, where ``is_software`` says whether the adapter is a CPU one. An
+    application passes something that quietens its own threads while a CPU adapter computes (the ``gma``
+    command's fits do: gma/commands/_openmp_workers.py); the library itself enters nothing."""
+    global _device_work_hook
+    previous, _device_work_hook = _device_work_hook, hook
+    try:
+        yield
+    finally:
+        _device_work_hook = previous
+
+
+def _device_work(gpu: GpuContext) -> AbstractContextManager:
+    hook = _device_work_hook
+    return contextlib.nullcontext() if hook is None else hook(gpu.is_software)
 
 
 def rasterizer_for(ctx: GpuContext) -> SurfelRasterizer:
@@ -46,8 +69,7 @@ class _RasterizeFunction(torch.autograd.Function):
     def forward(fctx, means, quats, scales, opacities, colors, viewmat, K, background, width, height, gpu, host,
                 replay):
         fctx.set_materialize_grads(False)  # unused outputs arrive as None and cost nothing
-        # On a CPU adapter torch's idle OpenMP workers would spin on the cores the render runs on.
-        with openmp_workers_asleep(active=gpu.is_software):
+        with _device_work(gpu):
             return _RasterizeFunction._forward(fctx, means, viewmat, K, background, width, height, gpu, host, replay)
 
     @staticmethod
@@ -58,8 +80,8 @@ class _RasterizeFunction(torch.autograd.Function):
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
-        # The surfels' values are checked while the GPU projects them (the checks took ~1-2 ms of a
-        # ~80 ms forward on the standard scene); nothing after projection runs on values that fail.
+        # The surfels' values are checked while the GPU projects them, off the critical path; nothing
+        # after projection runs on values that fail.
         state = rast.forward(surfels, camera, bg, replay=replay, read_images=True,
                              while_projecting=lambda: check_surfel_values(host))
         out = read_outputs(gpu, state)
@@ -74,7 +96,7 @@ class _RasterizeFunction(torch.autograd.Function):
         needs = fctx.needs_input_grad
         if not any(needs[:5]) and not needs[7]:
             return (None,) * 13
-        with openmp_workers_asleep(active=fctx.rast.ctx.is_software):
+        with _device_work(fctx.rast.ctx):
             return _RasterizeFunction._backward(fctx, needs, v_color, v_alpha, v_normal, v_depth)
 
     @staticmethod

@@ -9,7 +9,6 @@ the part after projection again, exactly sized, when a render needed more. The t
 from __future__ import annotations
 
 import math
-import os
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from gma.gpu.workspace import Workspace
 from gma.render.gpu_scan import ExclusiveScan
 from gma.render.gpu_sort import SORT_BLOCK, RadixSorter, dispatch_info
 from gma.render.layouts import render_params, tile_grid
+from gma.render.options import RasterOptions
 from gma.render.surfel_texels import COLORS_BINDING, SurfelTexels, TexelLease
 from gma.render.surfels import SurfelBuffers
 
@@ -61,8 +61,8 @@ class ProjectionState:
     # gives them back with its state.
     kept: list[wgpu.GPUBuffer] = field(default_factory=list)
     # Whether the tile walks render these (TILE_WALK) and projection wrote their layout of projected and
-    # colors4 (WALK_LAYOUT in project_fwd.wgsl): the passes that read them are compiled to match, whatever
-    # use_tile_walk and use_walk_layout say by then.
+    # colors4 (WALK_LAYOUT in project_fwd.wgsl, always with the tile walks): the passes that read them are
+    # compiled to match.
     tile_walk: bool = False
     walk_layout: bool = False
 
@@ -127,47 +127,17 @@ class SurfelRasterizer:
     """Renders :class:`SurfelBuffers` for a :class:`Camera`. Pipelines are compiled once per context
     and variant (channel count, batch size); a frame compiles nothing."""
 
-    def __init__(self, ctx: GpuContext):
+    def __init__(self, ctx: GpuContext, options: RasterOptions | None = None):
+        """``options``: the variants to run (default: :meth:`RasterOptions.for_context`, what this adapter
+        runs best); refused with ValueError when the adapter cannot run them."""
         self.ctx = ctx
+        self.options = RasterOptions.for_context(ctx) if options is None else options
+        self.options.check(ctx)
         self.workspace = Workspace(ctx)
         self.sorter = RadixSorter(ctx, self.workspace)
         self.scan = ExclusiveScan(ctx, self.workspace)
         self.isect_capacity_hint = 1 << 16
         self.depth_bits_hint = 1   # key bits the depth sort orders (forward)
-        self.use_float_atomics = True  # tests switch this off to exercise the compare-and-swap path
-        # Projection's frame stats by subgroup reductions (tests switch this off to exercise the
-        # workgroup-atomics variant that adapters without subgroups run; see project_fwd.wgsl).
-        self.project_subgroups = ctx.has_subgroups
-        # Subgroup shuffles pay off where workgroup memory reads are slow (CPU drivers such as lavapipe);
-        # on GPUs those reads are broadcasts and the plain loop is simpler. The subgroup variant is only
-        # validated on lavapipe so far: GMA_RASTER_SUBGROUPS=1 turns it on elsewhere, =0 off. Its loops
-        # keep one round's ballot in a single u32, hence at most 32 lanes.
-        wanted = os.environ.get("GMA_RASTER_SUBGROUPS", "auto").strip().lower()
-        capable = ctx.has_subgroups and 1 <= ctx.subgroup_size <= 32
-        self.use_subgroups = capable and (ctx.is_software if wanted == "auto" else wanted in ("1", "true", "on"))
-        # On lavapipe the subgroup backward adds its gradients into per-intersection records with plain
-        # loads and stores instead of per-surfel atomics (faster, and the same gradients on every run; see
-        # store_record in tile_walk_bwd.wgsl for why this is safe there only). Tests switch it off to
-        # exercise the atomics.
-        self.use_grad_records = self.use_subgroups and ctx.is_lavapipe and ctx.subgroup_size == 8
-        # With 8-lane subgroups one subgroup composites (and, with records, replays) a whole tile
-        # (tile_walk_fwd.wgsl); tests switch it off to exercise the per-subgroup variant that other
-        # subgroup sizes run. Gradient records need it.
-        self.use_tile_walk = True
-        # The tile walks read the projected surfels and their colours, and project_bwd the backward's
-        # gradient records, from textures (surfel_texels.py), where they fit; tests switch it off to check
-        # that the buffer reads give the same images and gradients.
-        self.use_surfel_texels = True
-        # With the tile walks projection puts each surfel's colour beside its ray plane and its normal and
-        # depth apart (WALK_LAYOUT: surfel_texels.wgsl), so that the backward walk reads one cache line per
-        # surfel; tests switch it off to check the same images and gradients, benchmarks to time it.
-        self.use_walk_layout = True
-        # On lavapipe projection, emission, the tile walks and project_bwd take their work from a queue, one
-        # workgroup per driver thread (common/work_queue.wgsl), instead of one contiguous share of the workgroups per
-        # thread; tests switch it off and set other workgroup counts to check that the images and gradients
-        # stay the same, benchmarks to time it.
-        self.use_work_queues = ctx.is_lavapipe
-        self.queue_workgroups = ctx.dispatch_threads
         self.texels = SurfelTexels(ctx)
         self.last_timings: dict[str, float] = {}
 
@@ -177,10 +147,9 @@ class SurfelRasterizer:
         B per surfel, 4 B of surfel id in the backward, 16 B per 4 channels; the subgroup path, which
         stages no surfel data: 4 B of block mask plus a 4 B hit-list entry per subgroup, and SG entries
         of scratch per subgroup), and the subgroup path on CPU adapters (see rasterize_core.wgsl). On
-        lavapipe (standard scene, 100k surfels) BATCH 128 or 64 was slower than 256, and 512 no faster
-        (standard scene and a fitted avatar at 192 px, five runs each, within the runs' scatter)."""
+        lavapipe smaller batches than 256 were slower and larger ones no faster (docs/design.md)."""
         limit = int(self.ctx.limits["max-compute-workgroup-storage-size"])
-        sg = self.ctx.subgroup_size if self.use_subgroups and channels <= 4 else 0
+        sg = self.ctx.subgroup_size if self.options.subgroups and channels <= 4 else 0
         per_surfel = 4 + 4 * (RASTER_THREADS_SUBGROUPS // sg) if sg else 68 + 16 * ((channels + 3) // 4)
         batch = 256  # at most: the subgroup path packs a hit's batch slot into 8 bits (hit_entry)
         fixed = 64 + (4 * RASTER_THREADS_SUBGROUPS if sg else 0)
@@ -189,11 +158,11 @@ class SurfelRasterizer:
         defines = {"CHANNELS": channels, "BATCH": batch, "USE_SUBGROUPS": False, "SG": 1, "TILE_WALK": False,
                    "WALK_LAYOUT": False}
         if sg:
-            # 8 lanes (lavapipe): one subgroup composites a whole tile (tile_walk_fwd.wgsl).
-            tile_walk = sg == 8 and self.use_tile_walk
-            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=tile_walk,
-                           WALK_LAYOUT=tile_walk and self.use_walk_layout)
-        defines["WORK_QUEUE"] = defines["TILE_WALK"] and self.use_work_queues
+            # 8 lanes (lavapipe): one subgroup composites a whole tile (tile_walk_fwd.wgsl), reading the
+            # surfels in the walks' layout (surfel_texels.wgsl: one cache line per surfel in the backward).
+            tile_walk = self.options.tile_walk
+            defines.update(USE_SUBGROUPS=True, SG=sg, TILE_WALK=tile_walk, WALK_LAYOUT=tile_walk)
+        defines["WORK_QUEUE"] = defines["TILE_WALK"] and self.options.work_queues
         return defines
 
     def _records_for(self, camera: Camera, channels: int, num_isects: int) -> bool:
@@ -202,7 +171,7 @@ class SurfelRasterizer:
         binding."""
         tx, ty = tile_grid(camera.width, camera.height)
         largest = _record_bytes(num_isects, normal_depth=True)
-        return (self.use_grad_records and self.raster_defines(channels)["TILE_WALK"]
+        return (self.options.grad_records and self.raster_defines(channels)["TILE_WALK"]
                 and tx * ty <= 1 << RECORD_KEY_SHIFT and largest <= self.ctx.max_binding_bytes)
 
     # -- passes -------------------------------------------------------------------------------------
@@ -226,7 +195,7 @@ class SurfelRasterizer:
         counter = self.workspace.get("work_queue", 16)
         encoder.clear_buffer(counter, 0, 16)
         resources[binding] = counter
-        return (max(1, self.queue_workgroups), 1, 1)
+        return (self.options.queue_workgroups, 1, 1)
 
     @staticmethod
     def _subgroup_inputs(resources: dict, colors4: wgpu.GPUBuffer, pixel_rows: wgpu.GPUBuffer | None = None) -> None:
@@ -283,8 +252,9 @@ class SurfelRasterizer:
         ctx.write(st.stats, np.array([0, 0, 0xFFFFFFFF, 0], np.uint32))  # see project_fwd.wgsl
         if n == 0:
             return st
-        queued = self.project_subgroups and self.use_work_queues   # the queue's variant uses subgroups
-        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.project_subgroups,
+        # (the queue's variant uses subgroups)
+        queued = self.options.project_subgroups and self.options.work_queues
+        p = ctx.compute_pipeline("render/project_fwd.wgsl", {"USE_SUBGROUPS": self.options.project_subgroups,
                                                              "PIXEL_ROWS": tile_walk,
                                                              "WALK_LAYOUT": st.walk_layout,
                                                              "WORK_QUEUE": queued})
@@ -345,7 +315,7 @@ class SurfelRasterizer:
         empty = self.workspace.get("empty", 64)
         if n > 0:
             self._setup(encoder, st, timer)
-            queued = subgroups and self.use_work_queues   # the queue's variant is the subgroup one
+            queued = subgroups and self.options.work_queues   # the queue's variant is the subgroup one
             emit = ctx.compute_pipeline("render/emit_isects.wgsl", {**keyed, "BLOCK_BITS": subgroups,
                                                                      "WORK_QUEUE": queued})
             # Emission writes scratch lists that the tile sort reads, and the sort writes the kept ones
@@ -390,7 +360,7 @@ class SurfelRasterizer:
     def _texels_for(self, defines: dict, n: int) -> SurfelTexels | None:
         """The surfel textures for a rasterizer variant, or None where it reads the buffers: only the
         tile walks (lavapipe) read textures, and only while the surfels fit them."""
-        if not (defines["TILE_WALK"] and self.use_surfel_texels and 0 < n <= self.texels.capacity):
+        if not (defines["TILE_WALK"] and 0 < n <= self.texels.capacity):
             return None
         return self.texels
 
@@ -401,8 +371,7 @@ class SurfelRasterizer:
         """Render (read the images with :func:`read_outputs`). With ``replay`` (the default) the state
         keeps freshly allocated buffers, everything :meth:`backward` needs. Without it the images land
         in scratch buffers that the next render overwrites (read them first), nothing for a backward
-        pass is written or kept, and the rasterizer drops the contributor counting (the standard
-        scene, 100k surfels, lavapipe, interleaved: 1.055x and 1.088x faster in two runs);
+        pass is written or kept, and the rasterizer drops the contributor counting (faster);
         :meth:`backward` refuses such a state.
 
         Two submissions, no host round trip between them: projection, then, encoded while the GPU
@@ -410,8 +379,8 @@ class SurfelRasterizer:
         needed (the intersection capacity and the depth sort's key bits, :func:`depth_key_bits`). Then
         it reads projection's counts: when this render needed more, the part after projection runs
         again with exact sizes (the first render, or a larger scene) and the hints grow. (Reading them
-        between the submissions left the GPU idle while the second part was encoded: standard scene,
-        100k surfels, lavapipe, ~4 ms of ~110.) With ``read_images`` the images come back in the same
+        between the submissions would leave the GPU idle while the second part is encoded.) With
+        ``read_images`` the images come back in the same
         transfer as the counts (one device round trip fewer; read again after a rerun), and
         :func:`read_outputs` returns them. ``while_projecting`` runs on the host after projection is
         submitted and before the rest is (the public call checks the surfels' values there, off the
@@ -563,12 +532,12 @@ class SurfelRasterizer:
         defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
                        GRAD_RECORDS=records is not None)
         # (Only the tile walk, the entry point with records, takes its tiles from a queue.)
-        defines["WORK_QUEUE"] = records is not None and state.proj.tile_walk and self.use_work_queues
+        defines["WORK_QUEUE"] = records is not None and state.proj.tile_walk and self.options.work_queues
         texels = self._texels_for(defines, n) if records is not None else None
         defines["SURFEL_TEXELS"] = texels is not None
         # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
         record_bytes = _record_bytes(state.num_isects, normal_depth)
-        defines["RECORD_TEXELS"] = use_record_texels = (records is not None and self.use_surfel_texels
+        defines["RECORD_TEXELS"] = use_record_texels = (records is not None
                                                         and record_bytes // 16 <= self.texels.max_texels)
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
@@ -638,7 +607,7 @@ class SurfelRasterizer:
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "RECORD_TEXELS": use_record_texels, "NORMAL_DEPTH_GRADS": normal_depth,
                         "COLORS_OUT": colors_out, "CHANNELS": c}
-        proj_defines["WORK_QUEUE"] = queued = self.use_work_queues and self.ctx.has_subgroups
+        proj_defines["WORK_QUEUE"] = queued = self.options.work_queues and self.ctx.has_subgroups
         proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out or queued else None)
         groups = self._groups(enc, proj_resources, queued, 14, ((n + 255) // 256, 1, 1))
         self._dispatch(enc, proj, proj_resources, groups, "project_bwd", timer)
@@ -661,7 +630,7 @@ class SurfelRasterizer:
 
     def backward_defines(self, channels: int) -> dict:
         defines = self.raster_defines(channels)
-        defines["FLOAT_ATOMICS"] = self.ctx.has_float_atomics and self.use_float_atomics
+        defines["FLOAT_ATOMICS"] = self.options.float_atomics
         return defines
 
     def render_to_texture(self, surfels: SurfelBuffers, camera: Camera, view: wgpu.GPUTextureView,

@@ -1,5 +1,5 @@
 // Work handed out at run time, for passes dispatched with one workgroup per CPU-driver thread (WORK_QUEUE;
-// gma/render/rasterizer.py, SurfelRasterizer.use_work_queues: lavapipe only).
+// gma/render/rasterizer.py, RasterOptions.work_queues: lavapipe only).
 //
 // Lavapipe does not hand a dispatch's workgroups to its threads one at a time: each of its N threads takes
 // one contiguous run of W / N of them (llvmpipe's compute thread pool, iter_per_thread), so a pass lasts as

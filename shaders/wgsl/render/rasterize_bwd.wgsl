@@ -205,7 +205,7 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 // (found per surfel through the slots, see tile_walk_bwd.wgsl), RECORD_VEC2S vec2s each, summed per
 // surfel by project_bwd.wgsl. The tile
 // walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each record once, from the one
-// subgroup that replays the tile: only on lavapipe (SurfelRasterizer.use_grad_records; GPUs, whose
+// subgroup that replays the tile: only on lavapipe (RasterOptions.grad_records; GPUs, whose
 // subgroups run concurrently, keep per-surfel atomics). History on the standard scene (100k surfels):
 // against a float atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about
 // a third of this pass), records that every subgroup of the tile updated with read-modify-writes at the

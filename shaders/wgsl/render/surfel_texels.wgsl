@@ -4,7 +4,7 @@
 // buffers (gma/render/surfel_texels.py, which explains why: on lavapipe a texel fetch serves all lanes at
 // once, a buffer read at a lane-varying index loops over the lanes); without, from the buffers.
 //
-// Define WALK_LAYOUT (SurfelRasterizer.use_walk_layout, on with the tile walks): projection wrote the walks'
+// Define WALK_LAYOUT (always with the tile walks: TILE_WALK): projection wrote the walks'
 // layout (project_fwd.wgsl): a surfel's 64 bytes of `projected` hold its ray plane (p_ref, dp_dx, dp_dy) and its colour
 // vec4 (channels 0-3, the depth in .w below 4 channels), and colors4 holds its normal and depth. The
 // backward walk reads only the first: one cache line per surfel instead of two (the standard layout has

@@ -1,21 +1,26 @@
-"""A newer lavapipe for Debian 12 and 13, kept in GMA's cache instead of replacing the system's Mesa.
+#!/usr/bin/env python3
+"""A newer lavapipe for Debian 12 and 13, installed for this user beside the system's Mesa (opt-in:
+``make install LAVAPIPE=backports`` runs it; GMA itself never fetches or registers drivers).
 
 Debian 12 ships Mesa 22.3; its backports carry Mesa 25, whose lavapipe runs the renderer's passes
 markedly faster on the same CPU. Debian 13 ships Mesa 25.0; its backports carry Mesa 26, whose lavapipe
 compiles a load or store with a lane-varying address as one vector gather or scatter instead of a loop
-over the lanes, and runs the passes in about three quarters of the time (docs/design.md, "The lavapipe
-GMA runs on"). Getting either system-wide means adding an apt source and upgrading every Mesa Vulkan
-driver on the machine, so instead ``gma lavapipe install`` (``scripts/install.sh`` runs it) fetches the
-backports package,
-checks it against Debian's signed archive index (gpgv and the Debian archive keyring, as apt would),
-and unpacks only the lavapipe library and its driver manifest into ``~/.cache/gma/lavapipe/<version>/``.
-The system's own lavapipe stays installed; it supplies the libraries the newer one links against and is
-the fallback. :func:`register` adds the cached manifest to the Vulkan loader's driver list
-(``VK_ADD_DRIVER_FILES``) before wgpu first starts, for this process and its children only, and the
-adapter choice prefers the newer Mesa among software adapters (:func:`mesa_version`).
+over the lanes (docs/design.md, "The lavapipe GMA runs on"). Getting either system-wide means adding an
+apt source and upgrading every Mesa Vulkan driver on the machine, so instead ``install`` fetches the
+backports package, checks it against Debian's signed archive index (gpgv or sqv and the Debian archive
+keyring, as apt would), unpacks only the lavapipe library and its driver manifest into
+``~/.cache/gma/lavapipe/<version>/`` (``$GMA_LAVAPIPE_DIR``), and lists that manifest where the Vulkan
+loader looks for this user's drivers: ``$XDG_DATA_HOME/vulkan/icd.d/`` (``~/.local/share/vulkan/icd.d``).
+Every Vulkan application of this user then sees both lavapipes; GMA's adapter choice takes the newer Mesa
+among software adapters. The system's lavapipe stays installed: it supplies the libraries the newer one
+links against and is the fallback. ``remove`` takes the listing out again (the cache stays), and the
+loader's own ``VK_DRIVER_FILES`` picks drivers for one process.
 
-``GMA_LAVAPIPE=system`` (or an explicit ``VK_ICD_FILENAMES`` / ``VK_DRIVER_FILES``) leaves the loader
-alone. ``gma lavapipe status`` says what is cached and what wgpu picks.
+    python3 scripts/lavapipe_backport.py status
+    python3 scripts/lavapipe_backport.py install [--force] [--update] [--with-dependencies]
+    python3 scripts/lavapipe_backport.py remove
+
+Standard library only (it runs before GMA is installed); ``status`` says what is cached and listed.
 """
 
 from __future__ import annotations
@@ -36,10 +41,6 @@ from datetime import datetime, timezone
 from email.utils import parsedate_to_datetime
 from pathlib import Path
 
-from gma.core.errors import DeviceError
-
-__all__ = ["cache_root", "cached_manifest", "install", "mesa_version", "package_version", "register"]
-
 MIRROR = "http://deb.debian.org/debian"
 # Debian release -> (the backports suite fetched from, the system Mesa from which on the system's is kept).
 # Debian 12: Mesa 22.3 against bookworm-backports' 25.0; Debian 13: Mesa 25.0 against trixie-backports' 26.1
@@ -49,9 +50,10 @@ PACKAGE = "mesa-vulkan-drivers"
 KEYRING = Path("/usr/share/keyrings/debian-archive-keyring.gpg")
 LIBRARY = "libvulkan_lvp.so"
 MANIFEST = "lvp_icd.json"
+LISTING = "gma_lavapipe_backport.json"   # the manifest's name in the loader's folder
 
 
-class LavapipeInstallError(DeviceError):
+class LavapipeInstallError(Exception):
     """Why the newer lavapipe was not installed (one line; the system's lavapipe stays in use)."""
 
 
@@ -75,10 +77,6 @@ def package_version(version: str) -> tuple[int, ...]:
     return _numbers(re.match(r"\s*(\d+)\.(\d+)(?:\.(\d+))?", version))
 
 
-def _system_chosen(environ=os.environ) -> bool:
-    return environ.get("GMA_LAVAPIPE", "").lower() == "system"
-
-
 def built_for(folder: Path) -> str:
     """The backports suite a cached driver came from (its ``source.json``; drivers cached before GMA fetched
     for Debian 13 came from bookworm-backports)."""
@@ -99,24 +97,31 @@ def cached_manifest(root: Path | None = None) -> Path | None:
     return max(found, key=lambda p: package_version(p.parent.name), default=None)
 
 
-def register(environ=os.environ) -> Path | None:
-    """Add the cached lavapipe to the Vulkan loader's drivers (must run before wgpu's first adapter
-    enumeration in the process: the loader reads the variable when wgpu creates its instance)."""
-    added = [p for p in environ.get("VK_ADD_DRIVER_FILES", "").split(os.pathsep) if p]
-    if _system_chosen(environ):
-        # (a child of a GMA process inherits the parent's registration: take the cached driver out again)
-        mine = [p for p in added if Path(p).resolve().is_relative_to(cache_root().resolve())]
-        if mine:
-            environ["VK_ADD_DRIVER_FILES"] = os.pathsep.join(p for p in added if p not in mine)
-        return None
-    if environ.get("VK_ICD_FILENAMES") or environ.get("VK_DRIVER_FILES"):
-        return None  # the user chose the drivers
-    manifest = cached_manifest()
-    if manifest is None:
-        return None
-    if str(manifest) not in added:
-        environ["VK_ADD_DRIVER_FILES"] = os.pathsep.join([*added, str(manifest)])
-    return manifest
+def loader_folder(environ=os.environ) -> Path:
+    """Where the Vulkan loader looks for this user's drivers: ``$XDG_DATA_HOME/vulkan/icd.d`` (by default
+    ``~/.local/share/vulkan/icd.d``)."""
+    data_home = environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(data_home) / "vulkan" / "icd.d"
+
+
+def list_with_loader(manifest: Path, folder: Path | None = None) -> Path:
+    """Write ``manifest`` (whose library path is absolute) into the loader's folder, atomically; its path."""
+    folder = folder or loader_folder()
+    folder.mkdir(parents=True, exist_ok=True)
+    target = folder / LISTING
+    tmp = target.with_name(f".{LISTING}.partial")
+    tmp.write_text(manifest.read_text())
+    tmp.replace(target)
+    return target
+
+
+def unlist(folder: Path | None = None) -> bool:
+    """Take the listing out of the loader's folder; whether there was one."""
+    target = (folder or loader_folder()) / LISTING
+    if not target.is_file():
+        return False
+    target.unlink()
+    return True
 
 
 # -- install --------------------------------------------------------------------------------------------
@@ -146,8 +151,6 @@ def backports_suite() -> str:
 def _why_not_needed() -> str | None:
     """None when this machine is one the newer lavapipe is for (Debian 12 or 13 with an older system Mesa
     than their backports carry)."""
-    if _system_chosen():
-        return "GMA_LAVAPIPE=system"
     codename = _codename()
     if codename not in BACKPORTS:
         return f"not Debian 12 or 13 ({codename or 'unknown system'}): its own Mesa is used"
@@ -320,7 +323,7 @@ def lavapipe_files(deb: bytes) -> tuple[bytes, bytes]:
 
 def _works(manifest: Path, version: str) -> str | None:
     """Start wgpu in a child process with only this driver; its adapter description, or None."""
-    env = {**os.environ, "VK_ICD_FILENAMES": str(manifest), "GMA_LAVAPIPE": "system"}
+    env = {**os.environ, "VK_ICD_FILENAMES": str(manifest), "VK_DRIVER_FILES": str(manifest)}
     code = ("import wgpu; a = [a.info['description'] for a in wgpu.gpu.enumerate_adapters_sync() "
             "if a.info['backend_type'] == 'Vulkan']; print(a[0] if a else '')")
     r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120,
@@ -340,7 +343,7 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
         print(f"[lavapipe] system lavapipe kept: {reason}")
         return None
     if not update and (cached := cached_manifest(root)) is not None:
-        return cached  # every `make test` runs this: no network once one is cached
+        return cached  # no network once one is cached
     arch = _dpkg("--print-architecture") or "amd64"
     suite = backports_suite()
     release = verified_release(_fetch(f"{MIRROR}/dists/{suite}/InRelease"))
@@ -384,7 +387,48 @@ def install(root: Path | None = None, force: bool = False, update: bool = False,
         shutil.rmtree(target, ignore_errors=True)
         # (Only now: the backport's Depends also lists what its other drivers need, which lavapipe may not.)
         hint = (f" (it depends on {' '.join(missing)}, not installed here: apt-get install {' '.join(missing)}, "
-                "or `gma lavapipe install --with-dependencies` as root)") if missing else ""
+                "or `scripts/lavapipe_backport.py install --with-dependencies` as root)") if missing else ""
         raise LavapipeInstallError(f"Mesa {version}'s lavapipe did not start here{hint}; the system's stays in use")
     print(f"[lavapipe] installed {described} in {target}")
     return target / MANIFEST
+
+
+def status() -> None:
+    manifest = cached_manifest()
+    listed = loader_folder() / LISTING
+    print(f"cached lavapipe: {manifest.parent if manifest else 'none'} (cache {cache_root()})")
+    print(f"listed for the Vulkan loader: {listed if listed.is_file() else 'no'}")
+    if reason := _why_not_needed():
+        print(f"not needed here: {reason}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("action", choices=("status", "install", "remove"))
+    p.add_argument("--force", action="store_true",
+                   help="install even where the system's Mesa would be kept (not Debian 12 or 13, or its Mesa "
+                        "is as new as the backport's major)")
+    p.add_argument("--with-dependencies", action="store_true",
+                   help="apt-get install the packages the backport links against that are missing (as root)")
+    p.add_argument("--update", action="store_true", help="look for a newer backport even with one cached")
+    args = p.parse_args(argv)
+    if args.action == "status":
+        status()
+        return 0
+    if args.action == "remove":
+        print(f"[lavapipe] {'unlisted' if unlist() else 'nothing listed in'} {loader_folder()}")
+        return 0
+    try:
+        manifest = install(force=args.force, update=args.update, with_dependencies=args.with_dependencies)
+    except LavapipeInstallError as e:
+        print(f"[lavapipe] {e}", file=sys.stderr)
+        return 1
+    if manifest is not None:
+        print(f"[lavapipe] listed {manifest.parent.name} for the Vulkan loader: {list_with_loader(manifest)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

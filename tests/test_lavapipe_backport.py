@@ -1,23 +1,40 @@
-"""The newer lavapipe kept in GMA's cache (gma.gpu.lavapipe): parsing Debian's index and the .deb,
-checking every download against the index, installing completely or not at all, registering with the
-Vulkan loader only where the user has not chosen drivers, and the adapter choice preferring the newer
-Mesa. Offline: downloads are served from memory (scripts/install.sh does the real fetch)."""
+"""The opt-in newer lavapipe (scripts/lavapipe_backport.py, outside the package): parsing Debian's index
+and the .deb, checking every download against the index, installing completely or not at all, listing
+the driver in the Vulkan loader's per-user folder and taking it out again; and the adapter choice
+preferring the newer Mesa. Offline: downloads are served from memory (`make install LAVAPIPE=backports`
+does the real fetch)."""
 
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import io
 import json
 import lzma
+import os
 import shutil
+import subprocess
+import sys
 import tarfile
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
 from gma.gpu import adapter as adapter_mod
-from gma.gpu import lavapipe
-from gma.gpu.lavapipe import LavapipeInstallError
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "lavapipe_backport.py"
+
+
+def _load_script():
+    spec = importlib.util.spec_from_file_location("lavapipe_backport", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+lavapipe = _load_script()
+LavapipeInstallError = lavapipe.LavapipeInstallError
 
 
 def _tar_xz(files: dict[str, bytes]) -> bytes:
@@ -167,10 +184,9 @@ def test_a_driver_that_does_not_start_is_removed(served, monkeypatch, tmp_path):
 
 
 def test_install_keeps_the_system_driver_where_it_is_not_needed(monkeypatch, capsys):
-    monkeypatch.setenv("GMA_LAVAPIPE", "system")
+    monkeypatch.setattr(lavapipe, "_os_release", lambda: {"VERSION_CODENAME": "noble"})
     assert lavapipe.install() is None
-    assert "system lavapipe kept: GMA_LAVAPIPE=system" in capsys.readouterr().out
-    monkeypatch.delenv("GMA_LAVAPIPE")
+    assert "system lavapipe kept: not Debian 12 or 13 (noble)" in capsys.readouterr().out
     monkeypatch.setattr(lavapipe.shutil, "which", lambda name: "/usr/bin/" + name)
     for codename, system_mesa, kept in (("bookworm", "22.3.6-1+deb12u1", False), ("bookworm", "24.2.8-1", True),
                                         ("trixie", "25.0.7-2", False), ("trixie", "26.1.6-1", True),
@@ -236,23 +252,45 @@ def test_each_release_registers_only_drivers_fetched_for_it(monkeypatch, tmp_pat
     assert lavapipe.cached_manifest().parent.name == "26.1.6-1_bpo13_1"
 
 
-def test_register_adds_the_newest_cached_driver_unless_the_user_chose(monkeypatch, tmp_path):
-    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(_cache_with(tmp_path, "24.2.8-1", "25.0.7-2_bpo12_1")))
-    env = {"VK_ADD_DRIVER_FILES": "/opt/other.json"}
-    manifest = lavapipe.register(env)
-    assert manifest == tmp_path / "25.0.7-2_bpo12_1" / "lvp_icd.json"
-    assert env["VK_ADD_DRIVER_FILES"].split(":") == ["/opt/other.json", str(manifest)]
-    lavapipe.register(env)  # idempotent
-    assert env["VK_ADD_DRIVER_FILES"].count(str(manifest)) == 1
-    for chosen in ({"GMA_LAVAPIPE": "system"}, {"VK_ICD_FILENAMES": "/x.json"}, {"VK_DRIVER_FILES": "/x.json"}):
-        assert lavapipe.register(dict(chosen)) is None
-    child = {**env, "GMA_LAVAPIPE": "system"}  # a child asking for the system's driver drops the inherited one
-    assert lavapipe.register(child) is None and child["VK_ADD_DRIVER_FILES"] == "/opt/other.json"
+def test_the_driver_is_listed_for_the_loader_and_taken_out_again(monkeypatch, tmp_path):
+    """install lists the cached driver's manifest in the loader's per-user folder ($XDG_DATA_HOME), as one
+    file replaced whole; remove takes it out and leaves the cache."""
+    monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(_cache_with(tmp_path / "cache", "24.2.8-1", "25.0.7-2_bpo12_1")))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    folder = tmp_path / "data" / "vulkan" / "icd.d"
+    assert lavapipe.loader_folder() == folder
+    monkeypatch.setattr(lavapipe, "_why_not_needed", lambda: None)
+    assert lavapipe.main(["install"]) == 0
+    listed = folder / lavapipe.LISTING
+    assert listed.read_text() == (tmp_path / "cache" / "25.0.7-2_bpo12_1" / "lvp_icd.json").read_text()
+    assert lavapipe.main(["install"]) == 0 and sorted(p.name for p in folder.iterdir()) == [listed.name]
+    assert lavapipe.main(["remove"]) == 0 and not listed.exists()
+    assert lavapipe.cached_manifest() is not None
+    monkeypatch.delenv("XDG_DATA_HOME")
+    assert lavapipe.loader_folder() == Path.home() / ".local" / "share" / "vulkan" / "icd.d"
+
+
+def test_a_failed_install_is_one_line_and_lists_nothing(served, monkeypatch, tmp_path, capsys):
+    served["pool/main/m/mesa/new.deb"] = b"corrupt"
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    assert lavapipe.main(["install", "--force"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "checksum" in err[0]
+    assert not (tmp_path / "data").exists()
 
 
 def test_an_incomplete_cache_folder_is_ignored(monkeypatch, tmp_path):
     monkeypatch.setenv("GMA_LAVAPIPE_DIR", str(_cache_with(tmp_path, "25.0.7-2", complete=False)))
-    assert lavapipe.register({}) is None
+    assert lavapipe.cached_manifest() is None
+
+
+def test_the_script_runs_without_gma():
+    """It runs before GMA is installed: the standard library only (a bad action: argparse's exit 2)."""
+    out = subprocess.run([sys.executable, "-I", str(SCRIPT), "status"], capture_output=True, text=True,
+                         timeout=60, env={**os.environ, "PYTHONPATH": ""})
+    assert out.returncode == 0 and "cached lavapipe:" in out.stdout, out.stderr
+    bad = subprocess.run([sys.executable, "-I", str(SCRIPT), "fetch"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
 
 
 def test_adapter_choice_prefers_hardware_then_the_newer_mesa():
@@ -263,4 +301,20 @@ def test_adapter_choice_prefers_hardware_then_the_newer_mesa():
     gl = fake("CPU", "4.5 (Core Profile) Mesa 25.0.7", backend="OpenGL")
     gpu = fake("DiscreteGPU", "NVIDIA 560.35.03")
     assert min([old, gl, new], key=adapter_mod._rank) is new
+    assert adapter_mod.mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)") == (25, 0, 7)
+    assert adapter_mod.mesa_version("NVIDIA driver") == ()
     assert min([old, new, gpu], key=adapter_mod._rank) is gpu
+
+
+@pytest.mark.gpu
+def test_gma_gpu_names_the_adapter_and_the_loader_variables(tmp_path):
+    """``gma gpu`` lists the adapters, the one GMA renders with (its driver) and the loader's variables;
+    a driver listed in the loader's per-user folder is seen without GMA doing anything."""
+    env = {**os.environ, "VK_ADD_DRIVER_FILES": str(tmp_path / "absent.json"), "PYTHONPATH": str(SCRIPT.parents[1])}
+    out = subprocess.run([sys.executable, "-m", "gma.cli", "gpu"], capture_output=True, text=True, timeout=120,
+                         env=env, cwd=SCRIPT.parents[1])
+    if "No usable GPU adapter" in out.stderr:
+        pytest.skip("no adapter")
+    assert out.returncode == 0, out.stderr
+    assert "seen: " in out.stdout and "renders with: " in out.stdout
+    assert f"VK_ADD_DRIVER_FILES={tmp_path / 'absent.json'}" in out.stdout

@@ -1,5 +1,6 @@
-"""Torch's idle OpenMP workers asleep while GMA renders on a CPU adapter (gma/gpu/openmp_workers.py):
-they stop spinning, torch works as before afterwards, and the render is the same."""
+"""Torch's idle OpenMP workers asleep while GMA renders on a CPU adapter, the gma command's opt-in
+(gma/commands/_openmp_workers.py, entered through gma.render.api.around_device_work): they stop spinning,
+torch works as before afterwards, and the render is the same."""
 
 import threading
 import time
@@ -9,11 +10,12 @@ import pytest
 import torch
 from render_helpers import default_camera, torch_scene
 
-from gma.gpu import openmp_workers
-from gma.gpu.openmp_workers import openmp_workers_asleep
+from gma.commands import _openmp_workers as openmp_workers
+from gma.commands._openmp_workers import openmp_workers_asleep
 from gma.render import rasterize
+from gma.render.api import around_device_work
 
-pytestmark = pytest.mark.skipif(openmp_workers._library() is None, reason="needs torch on libgomp (Linux)")
+needs_libgomp = pytest.mark.skipif(openmp_workers._library() is None, reason="needs torch on libgomp (Linux)")
 
 
 @pytest.fixture(autouse=True)
@@ -51,8 +53,8 @@ def _others_cpu_after_a_parallel_op(asleep: bool) -> float:
     return used
 
 
-def test_the_workers_sleep_instead_of_spinning(monkeypatch):
-    monkeypatch.delenv("GMA_OPENMP_WORKERS", raising=False)
+@needs_libgomp
+def test_the_workers_sleep_instead_of_spinning():
     spinning = min(_others_cpu_after_a_parallel_op(False) for _ in range(3))
     asleep = max(_others_cpu_after_a_parallel_op(True) for _ in range(3))
     # Asleep, the workers take nothing measurable (wake-up and exit: microseconds); allow 1.5 ms for
@@ -63,6 +65,7 @@ def test_the_workers_sleep_instead_of_spinning(monkeypatch):
         assert asleep < spinning / 4
 
 
+@needs_libgomp
 def test_torch_runs_as_before_afterwards_errors_included():
     gomp = openmp_workers._library()
     threads = torch.get_num_threads()
@@ -81,13 +84,10 @@ def test_torch_runs_as_before_afterwards_errors_included():
     assert float(y.sum()) == 8_000_000.0
 
 
-def test_it_does_nothing_where_it_does_not_apply(monkeypatch):
+@needs_libgomp
+def test_it_does_nothing_where_it_does_not_apply():
     with openmp_workers_asleep(active=False) as sleeping:
         assert not sleeping
-    monkeypatch.setenv("GMA_OPENMP_WORKERS", "spin")
-    with openmp_workers_asleep() as sleeping:
-        assert not sleeping
-    monkeypatch.delenv("GMA_OPENMP_WORKERS")
     seen = []
 
     def other_thread():
@@ -100,16 +100,43 @@ def test_it_does_nothing_where_it_does_not_apply(monkeypatch):
     assert seen == [False]
 
 
-def test_the_public_render_is_the_same_either_way(gpu, monkeypatch):
+def _render_step(gpu, scene, cam) -> list[torch.Tensor]:
+    params = {k: v.clone().requires_grad_(True) for k, v in scene.items()}
+    out = rasterize(params["means"], params["quats"], params["scales"], params["opacities"], params["colors"],
+                    torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K), cam.width, cam.height, ctx=gpu)
+    (out.color.square().mean() + out.depth.mean()).backward()
+    return [out.color.detach(), out.depth.detach()] + [params[k].grad for k in sorted(params)]
+
+
+@needs_libgomp
+def test_the_public_render_is_the_same_either_way(gpu):
     cam = default_camera(96, 80)
     scene = torch_scene(300, seed=4)
-    results = []
-    for mode in ("spin", ""):
-        monkeypatch.setenv("GMA_OPENMP_WORKERS", mode)
-        params = {k: v.clone().requires_grad_(True) for k, v in scene.items()}
-        out = rasterize(params["means"], params["quats"], params["scales"], params["opacities"], params["colors"],
-                        torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K), cam.width, cam.height, ctx=gpu)
-        (out.color.square().mean() + out.depth.mean()).backward()
-        results.append([out.color.detach(), out.depth.detach()] + [params[k].grad for k in sorted(params)])
-    assert all(torch.equal(a, b) for a, b in zip(*results))
+    spinning = _render_step(gpu, scene, cam)
+    with around_device_work(openmp_workers_asleep):
+        asleep = _render_step(gpu, scene, cam)
+    assert all(torch.equal(a, b) for a, b in zip(spinning, asleep))
     assert openmp_workers._library().omp_in_parallel() == 0
+
+
+def test_the_library_enters_only_the_hook_it_is_given(gpu):
+    """The public call enters the application's hook around its forward's and its backward's GPU work,
+    with whether the adapter is a CPU one, only inside ``around_device_work``, and nothing after it."""
+    import contextlib
+
+    cam = default_camera(40, 32)
+    scene = torch_scene(50, seed=6)
+    entered = []
+
+    @contextlib.contextmanager
+    def hook(is_software):
+        entered.append(is_software)
+        yield
+
+    _render_step(gpu, scene, cam)
+    assert entered == []
+    with around_device_work(hook):
+        _render_step(gpu, scene, cam)
+    assert entered == [gpu.is_software] * 2   # the forward and the backward
+    _render_step(gpu, scene, cam)
+    assert len(entered) == 2

@@ -1,14 +1,15 @@
-"""Torch's idle OpenMP workers asleep while a CPU adapter renders.
+"""Torch's idle OpenMP workers asleep while a CPU adapter renders: an opt-in of the ``gma`` command's
+fits (``gma fit``, ``gma demo``), which enter it around every public render call through
+:func:`gma.render.api.around_device_work`. It reaches into libgomp's ABI, which a library has no business
+doing inside an application that embeds it; the command is the application here.
 
 Torch runs its CPU ops on an OpenMP thread pool (libgomp on Linux). After each parallel op, libgomp's
-worker threads spin-wait for the next one before they sleep: by default 300,000 pause instructions,
-about 8 ms of a core on this project's 2-core VMs. In a loop around ``gma.render.rasterize`` every
-user op before the render (the parameters' ``clone()``) and before its backward (the loss) starts such
-a spin, on a core that lavapipe's threads need: the spinning worker took 16 ms of CPU per public
-forward+backward step of the standard scene, all of it out of lavapipe's share (projection 8.9
-instead of 4.9 ms, the backward rasterize 33.1 instead of 28.3). ``OMP_WAIT_POLICY=passive`` stops
-the spin, but only when set before torch is imported, for the whole process, and torch's own chains of
-ops lose by it.
+worker threads spin-wait for the next one before they sleep (by default 300,000 pause instructions).
+In a loop around ``gma.render.rasterize`` every user op before the render (the parameters' ``clone()``)
+and before its backward (the loss) starts such a spin, on a core that lavapipe's threads need: on a
+machine with few cores that time comes out of lavapipe's share (docs/design.md has the figures).
+``OMP_WAIT_POLICY=passive`` stops the spin, but only when set before torch is imported, for the whole
+process, and torch's own chains of ops lose by it.
 
 :func:`openmp_workers_asleep` stops it only while GMA waits for the adapter: it opens a parallel
 region of torch's pool (``GOMP_parallel_start``, libgomp's ABI for compiler-made code) whose workers
@@ -22,7 +23,7 @@ the region covers only GMA's own code, which keeps its host work in numpy.
 It does nothing unless all of these hold: Linux, torch's parallel backend is OpenMP with libgomp
 already loaded, torch uses more than one thread, the caller is the main thread (each thread that runs
 torch ops has a pool of its own; another thread's region would make a new pool rather than quiet the
-one that spins), no region is open on it, and ``GMA_OPENMP_WORKERS`` is not ``spin``.
+one that spins) and no region is open on it.
 """
 
 from __future__ import annotations
@@ -84,8 +85,6 @@ def _library() -> ctypes.CDLL | None:
 
 
 def _applies() -> bool:
-    if os.environ.get("GMA_OPENMP_WORKERS", "") == "spin":
-        return False
     if threading.current_thread() is not threading.main_thread() or torch.get_num_threads() < 2:
         return False
     gomp = _library()
