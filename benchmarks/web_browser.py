@@ -1,0 +1,73 @@
+"""Opening an exported avatar page in headless Chromium (Debian's ``chromium``, software WebGL) through
+Playwright, for the web-export benchmark and tests: wait for ``window.gmaReady``, capture the view, read
+the page's FPS."""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+# SwiftShader is Chromium's software WebGL; a machine without a GPU gets it, and naming it keeps a GPU
+# machine's figures comparable.
+CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist"]
+UI_HEIGHT = 48  # the control bar under a page exported with --size
+
+
+def chromium_path() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def missing_browser() -> str | None:
+    """Why a page cannot be opened here (None when it can)."""
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        return "playwright is not installed (pip install -e .[dev])"
+    if chromium_path() is None:
+        return "Debian's chromium is not installed (scripts/install.sh as root, or apt-get install chromium)"
+    return None
+
+
+@contextlib.contextmanager
+def browser() -> Iterator[object]:
+    """A headless Chromium (a Playwright ``Browser``)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+def open_page(b, page: Path, size: tuple[int, int], fragment: str = "", timeout_s: float = 120.0):
+    """Load ``page`` (exported with ``--size`` ``size``) and wait until its first frame is drawn; raises
+    RuntimeError with the page's error when it fails."""
+    tab = b.new_page(viewport={"width": size[0], "height": size[1] + UI_HEIGHT})
+    errors: list[str] = []
+    tab.on("pageerror", lambda e: errors.append(str(e)))
+    tab.goto(f"{Path(page).resolve().as_uri()}{fragment}")
+    tab.wait_for_function("window.gmaReady === true || window.gmaError !== undefined", timeout=timeout_s * 1e3)
+    if tab.evaluate("window.gmaError") or errors:
+        raise RuntimeError(f"{page}: {tab.evaluate('window.gmaError') or errors[0]}")
+    return tab
+
+
+def capture(tab) -> np.ndarray:
+    """[H, W, 3] uint8 of the page's view (the canvas, without the control bar)."""
+    import imageio.v3 as iio
+
+    return iio.imread(tab.locator("#view").screenshot(), extension=".png")[..., :3]
+
+
+def page_fps(tab, seconds: float = 6.0) -> float:
+    """Frames the page drew per second over ``seconds`` (its own counter, read after a settling second)."""
+    tab.wait_for_timeout(1000)
+    start = tab.evaluate("window.gmaFrames")
+    tab.wait_for_timeout(seconds * 1e3)
+    return (tab.evaluate("window.gmaFrames") - start) / seconds
