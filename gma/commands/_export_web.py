@@ -26,7 +26,7 @@ def _motion_name(spec: str) -> str:
 
 
 def run_web(args: argparse.Namespace) -> int:
-    """Write the page; checks the output, the build and the motions before the slow work."""
+    """Write the page; checks the output, the avatar, the motions and the build before the slow work."""
     out = Path(args.out)
     if args.format is not None:
         raise InputError(f"{out}: an .html export is a web page; --format {args.format} is for .ply/.glb/.obj")
@@ -44,7 +44,6 @@ def run_web(args: argparse.Namespace) -> int:
     from gma.export import web
     from gma.view.controls import load_motion
 
-    bundle = web.page_bundle()
     start = time.perf_counter()
     avatar = Avatar.load(args.avatar)
     body = load_body(avatar.body_name)
@@ -54,6 +53,7 @@ def run_web(args: argparse.Namespace) -> int:
     for spec, (_, m) in zip(specs, motions):
         if len(m) == 0:
             raise InputError(f"motion {spec!r}: has no frames")
+    bundle = web.page_bundle()
     orbit, camera = page_camera(avatar, body, motions[0][1])
     splats = web.skinned_splats(avatar, body)
     tracks = [(name, m, web.motion_bones(avatar, body, m)) for name, m in motions]

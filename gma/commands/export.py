@@ -23,7 +23,8 @@ FORMATS = ("3dgs", "2dgs", "mesh")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("export", help="export an avatar as a Gaussian-splat PLY, a mesh (GLB/OBJ/PLY) or a web page (HTML)",
+    p = subparsers.add_parser("export", help="export an avatar as a Gaussian-splat PLY, a mesh (GLB/OBJ/PLY) or a "
+                              "web page that plays it (HTML)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("avatar", help="fitted avatar .gma")
     p.add_argument("out", help="output .ply (splats, or a mesh with --format mesh), .glb or .obj (mesh), .html "

@@ -71,8 +71,10 @@ class PageCamera:
     fov_y: float
 
 
-def page_bundle(bundle: Path = BUNDLE) -> str:
-    """The page's JavaScript (Spark, three.js and the player in one ES module)."""
+def page_bundle(bundle: Path | None = None) -> str:
+    """The page's JavaScript (Spark, three.js and the player in one ES module), from ``bundle`` (default
+    ``web/dist/gma-page.js`` of this checkout)."""
+    bundle = bundle or BUNDLE
     if not bundle.is_file():
         raise InputError(f"{bundle}: the web page's JavaScript is not built; it needs node and npm "
                          "(scripts/install.sh, or: cd web && npm ci && npm run build)")
@@ -92,8 +94,7 @@ def surfel_bone_weights(decoded: DecodedAvatar, body, k: int = BONES_PER_SURFEL)
     b = decoded.binding
     corners = body.faces[b.face_id]  # [N, 3]
     bary = torch.stack([b.uv[:, 0], b.uv[:, 1], 1 - b.uv[:, 0] - b.uv[:, 1]], 1)  # [N, 3]
-    num_bones = int(body.skin_indices.max()) + 1
-    dense = torch.zeros(len(b), num_bones)
+    dense = torch.zeros(len(b), body.num_bones)
     for c in range(3):
         w = body.skin_weights[corners[:, c]] * bary[:, c:c + 1]  # [N, K]
         dense.scatter_add_(1, body.skin_indices[corners[:, c]].long(), w)
@@ -117,8 +118,7 @@ def pack_skin(indices: np.ndarray, weights: np.ndarray) -> np.ndarray:
 def skinned_splats(avatar: Avatar, body, decoded: DecodedAvatar | None = None) -> SkinnedSplats:
     """The avatar's surfels at rest with their bones (see :class:`SkinnedSplats`)."""
     decoded = decoded or avatar.decode()
-    num_bones = int(body.skin_indices.max()) + 1
-    identity = torch.eye(4).expand(num_bones, 4, 4)
+    identity = torch.eye(4).expand(body.num_bones, 4, 4)
     rest = pose_surfels(decoded, body.faces, body.skin_indices, body.skin_weights,
                         body.rest_vertices(_avatar_params(avatar, body)), identity)
     indices, weights = surfel_bone_weights(decoded, body)
