@@ -4,7 +4,9 @@ the page's FPS."""
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import re
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -46,11 +48,14 @@ def browser() -> Iterator[object]:
 
 
 def open_page(b, page: Path, size: tuple[int, int], fragment: str = "", timeout_s: float = 120.0):
-    """Load ``page`` (exported with ``--size`` ``size``) and wait until its first frame is drawn; raises
-    RuntimeError with the page's error when it fails."""
+    """Load ``page`` (exported with ``--size`` ``size``) with the network cut off and wait until its first
+    frame is drawn; raises RuntimeError with the page's error when it fails or asked for anything that is
+    not in the file."""
     tab = b.new_page(viewport={"width": size[0], "height": size[1] + UI_HEIGHT})
     errors: list[str] = []
     tab.on("pageerror", lambda e: errors.append(str(e)))
+    tab.route(re.compile(r"^(?!(file|data|blob):)"), lambda route: (errors.append(f"fetched {route.request.url}"),
+                                                                     route.abort()))
     tab.goto(f"{Path(page).resolve().as_uri()}{fragment}")
     tab.wait_for_function("window.gmaReady === true || window.gmaError !== undefined", timeout=timeout_s * 1e3)
     if tab.evaluate("window.gmaError") or errors:
@@ -59,10 +64,12 @@ def open_page(b, page: Path, size: tuple[int, int], fragment: str = "", timeout_
 
 
 def capture(tab) -> np.ndarray:
-    """[H, W, 3] uint8 of the page's view (the canvas, without the control bar)."""
+    """[H, W, 3] uint8 of the page's view: the canvas's pixels, read between two of its frames (a
+    screenshot would wait for the compositor, which a slow software frame can hold up for seconds)."""
     import imageio.v3 as iio
 
-    return iio.imread(tab.locator("#view").screenshot(), extension=".png")[..., :3]
+    url = tab.evaluate("document.getElementById('view').toDataURL('image/png')")
+    return iio.imread(base64.b64decode(url.split(",", 1)[1]), extension=".png")[..., :3]
 
 
 def page_fps(tab, seconds: float = 6.0) -> float:

@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
             if args.screenshot:
                 tab.evaluate("window.gmaPlayer.time = 1.0")
                 tab.wait_for_timeout(2000)
-                tab.screenshot(path=str(args.screenshot))
+                tab.screenshot(path=str(args.screenshot), timeout=120_000)
                 print(f"wrote {args.screenshot}")
     return 0
 

@@ -3,14 +3,14 @@
 The page skins the surfels on the GPU rather than storing them posed per frame: it holds the surfels once,
 at rest (the avatar's own shape, every bone at identity), each surfel's four strongest bones with weights
 blended from its face's vertices by its barycentric position, and per motion frame one rigid transform
-per bone. A quick-preset avatar (54,840 surfels) with a 4-second motion is then a few MB; its posed
-surfels per frame would be ~1 MB a frame. The renderer is Spark (three.js, WebGL2), from ``web/`` (npm),
-bundled by ``npm run build`` into ``web/dist/gma-page.js`` and inlined here, so the page needs no server
-and no network.
+per bone. Bones cost a few hundred kB per motion where posed surfels would cost about as much per frame.
+The renderer is Spark (three.js, WebGL2), from ``web/`` (npm), bundled by ``npm run build`` into
+``web/dist/gma-page.js`` and inlined here, so the page needs no server and no network.
 
-Skinning the surfel centre with blended vertex weights is exact for a surfel on its face (linear blend
-skinning is linear in the weights) up to the four-bone truncation; what it leaves out is the face's
-stretch under posing (GMA scales a surfel by its posed face's area) and facial expressions.
+Linear blend skinning of a surfel's centre with its blended weights equals GMA's placement of a surfel
+lying on its face, up to the four-bone truncation; Spark blends dual quaternions, which departs from it
+only where a surfel's bones turn far apart. Left out: a surfel's stretch with its posed face (GMA scales
+it by the face's area) and facial expressions.
 """
 
 from __future__ import annotations

@@ -186,12 +186,12 @@ async function main() {
     last = now;
     player.apply();
     controls.update();
+    // Spark draws nothing until its first sort of the generated splats has finished.
+    const drawsAvatar = spark.activeSplats > 0 && spark.orderingTexture;
     renderer.render(scene, camera);
     showState();
     countFrame();
-    if (!window.gmaReady && spark.display.numSplats >= meta.numSplats && !spark.sorting) {
-      window.gmaReady = true;
-    }
+    if (drawsAvatar) window.gmaReady = true;
   });
 }
 
