@@ -72,9 +72,11 @@ def capture(tab) -> np.ndarray:
     return iio.imread(base64.b64decode(url.split(",", 1)[1]), extension=".png")[..., :3]
 
 
-def page_fps(tab, seconds: float = 6.0) -> float:
-    """Frames the page drew per second over ``seconds`` (its own counter, read after a settling second)."""
-    tab.wait_for_timeout(1000)
-    start = tab.evaluate("window.gmaFrames")
-    tab.wait_for_timeout(seconds * 1e3)
-    return (tab.evaluate("window.gmaFrames") - start) / seconds
+def page_fps(tab, frames: int = 4, timeout_s: float = 300.0) -> float:
+    """Frames per second the page draws, timed by the page's clock over ``frames`` frames (after one
+    settling frame): a software frame can take seconds, so a fixed window would count none."""
+    tab.wait_for_function("window.gmaFrames >= 1", timeout=timeout_s * 1e3)
+    start = tab.evaluate("[window.gmaFrames, performance.now()]")
+    tab.wait_for_function(f"window.gmaFrames >= {start[0] + frames}", timeout=timeout_s * 1e3)
+    end = tab.evaluate("[window.gmaFrames, performance.now()]")
+    return (end[0] - start[0]) / ((end[1] - start[1]) / 1e3)

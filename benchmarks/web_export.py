@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        avatar = args.avatar or quick_avatar(tmp / "quick.gma")
+        avatar = args.avatar or quick_avatar(tmp / "random_quick.gma")
         page512, page640 = tmp / "a512.html", tmp / "a640.html"
         seconds = export(avatar, page512, FIDELITY_SIZE, args.motion)
         export(avatar, page640, FPS_SIZE, args.motion)
