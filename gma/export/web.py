@@ -40,9 +40,10 @@ __all__ = ["BONES_PER_SURFEL", "PageCamera", "SkinnedSplats", "motion_bones", "m
 
 BONES_PER_SURFEL = 4  # what Spark's SplatSkinning reads per splat
 BUNDLE = Path(__file__).resolve().parents[2] / "web" / "dist" / "gma-page.js"
-# Spark adds this much to each splat's 2D covariance (pixels²) as an anti-aliasing filter; GMA's
-# rasteriser has no such filter, so the page turns it off.
-BLUR_AMOUNT = 0.0
+# How far from its centre Spark draws a splat, in standard deviations. GMA draws a surfel while its
+# alpha o·exp(-r²/2) reaches 1/255, out to r = sqrt(2 ln 255) ≈ 3.33 for an opaque one; Spark's default
+# (sqrt 8 ≈ 2.83) would trim the soft edge of every silhouette.
+MAX_STD_DEV = 3.33
 
 
 @dataclass
@@ -188,7 +189,7 @@ def page_html(title: str, splats: SkinnedSplats, motions: list[tuple[str, Motion
     blob, specs = _pack_arrays(arrays)
     meta = {
         "numSplats": int(splats.means.shape[0]), "numBones": int(motions[0][2].shape[1]),
-        "enable2DGS": True, "blurAmount": BLUR_AMOUNT, "background": list(background),
+        "enable2DGS": True, "maxStdDev": MAX_STD_DEV, "background": list(background),
         "camera": {"eye": list(camera.eye), "target": list(camera.target), "up": list(camera.up),
                    "fovY": camera.fov_y},
         "motions": [{"name": name, "fps": float(m.fps), "frames": len(m), "bones": specs.pop(f"bones{i}")}

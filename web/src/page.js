@@ -140,7 +140,9 @@ async function main() {
   renderer.setClearColor(new THREE.Color().fromArray(meta.background), 1);
   const scene = new THREE.Scene();
   const camera = makeCamera(canvas.clientWidth, canvas.clientHeight);
-  const spark = new SparkRenderer({ renderer, enable2DGS: meta.enable2DGS, blurAmount: meta.blurAmount });
+  const spark = new SparkRenderer({
+    renderer, enable2DGS: meta.enable2DGS, maxStdDev: meta.maxStdDev,
+  });
   scene.add(spark);
 
   const { packed, skin, motions } = buildSplats(await readBlob());
