@@ -157,7 +157,8 @@ def test_page_frame_matches_gma_render(page, avatar_file, gpu):
 
 @pytest.mark.slow
 def test_page_plays_the_motion(page):
-    """Playing, the time advances and the picture changes; the picker switches motion."""
+    """Playing, the time advances and the picture changes; the picker switches motion; paused, a drag
+    turns the view."""
     wb = _browser_or_skip()
     with wb.browser() as b:
         tab = wb.open_page(b, page, VIEW)
@@ -170,3 +171,18 @@ def test_page_plays_the_motion(page):
         assert tab.locator("#motion option").all_inner_texts() == ["walk", "turn"]
         tab.select_option("#motion", "1")
         assert tab.evaluate("window.gmaPlayer.index") == 1
+        tab.click("#play")
+        assert tab.evaluate("window.gmaPlayer.playing") is False
+        _next_frames(tab)
+        still = wb.capture(tab)
+        tab.mouse.move(VIEW[0] / 2, VIEW[1] / 2)  # a drag orbits the view
+        tab.mouse.down()
+        tab.mouse.move(VIEW[0] / 2 + 80, VIEW[1] / 2, steps=4)
+        tab.mouse.up()
+        _next_frames(tab)
+        assert np.abs(wb.capture(tab).astype(int) - still).max() > 64
+
+
+def _next_frames(tab, count: int = 2) -> None:
+    frames = tab.evaluate("window.gmaFrames")
+    tab.wait_for_function(f"window.gmaFrames >= {frames + count}", timeout=60_000)
