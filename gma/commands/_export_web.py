@@ -54,7 +54,7 @@ def run_web(args: argparse.Namespace) -> int:
         if len(m) == 0:
             raise InputError(f"motion {spec!r}: has no frames")
     bundle = web.page_bundle()
-    orbit, camera = page_camera(avatar, body, motions[0][1])
+    _, camera = page_camera(avatar, body, motions[0][1])
     splats = web.skinned_splats(avatar, body)
     tracks = [(name, m, web.motion_bones(avatar, body, m)) for name, m in motions]
     page = web.page_html(Path(args.avatar).stem, splats, tracks, camera, bundle, args.size)
