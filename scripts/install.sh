@@ -62,3 +62,31 @@ elif grep -qsE '^VERSION_CODENAME="?(bookworm|trixie)' /etc/os-release \
         && [ ! -e "${XDG_DATA_HOME:-$HOME/.local/share}/vulkan/icd.d/gma_lavapipe_backport.json" ]; then
     echo "[install] renders faster on lavapipe with the backports' Mesa: make install LAVAPIPE=backports (README, Environment)"
 fi
+
+# --- Web export (gma export avatar.gma page.html) -------------------------------------------------------------
+# node and npm build the page's JavaScript (web/: Spark and three.js, pinned in web/package-lock.json) into
+# web/dist/gma-page.js; Debian's chromium runs the page's tests headless. Both are optional: without them
+# the export says what is missing and the browser tests are skipped with the reason.
+web_apt=()
+command -v npm >/dev/null 2>&1 || web_apt+=(nodejs npm)
+command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || web_apt+=(chromium)
+if [ ${#web_apt[@]} -gt 0 ]; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "[install] apt-get install ${web_apt[*]} (web export)"
+        export DEBIAN_FRONTEND=noninteractive
+        if ! { apt-get update -qq && apt-get install -y -qq "${web_apt[@]}" >/dev/null; }; then
+            echo "[install] could not install ${web_apt[*]}; web pages cannot be exported or tested" >&2
+        fi
+    else
+        echo "[install] missing for the web export: ${web_apt[*]} (install them with your package manager)" >&2
+    fi
+fi
+web_bundle=web/dist/gma-page.js
+if command -v npm >/dev/null 2>&1; then
+    if [ ! -f "$web_bundle" ] || [ web/package-lock.json -nt "$web_bundle" ] || [ web/src/page.js -nt "$web_bundle" ]; then
+        echo "[install] npm ci && npm run build in web/"
+        if ! (cd web && npm ci --no-audit --no-fund --loglevel=error && npm run build --silent); then
+            echo "[install] could not build $web_bundle; gma export ... .html will say so" >&2
+        fi
+    fi
+fi

@@ -18,7 +18,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / "benchmarks"
-HELPERS = {"common.py", "fit_helpers.py"}  # modules the scripts import, not scripts
+HELPERS = {"common.py", "fit_helpers.py", "web_browser.py"}  # modules the scripts import, not scripts
 
 # script -> arguments that make it small; {tmp} is a fresh folder for its outputs, {repo} this checkout.
 # A string: skip, with why.
@@ -54,6 +54,8 @@ SMOKE: dict[str, list[str] | str] = {
     "video_masks.py": ["--work", "{tmp}/work"],
     "video_hdr.py": ["--work", "{tmp}/work", "--figure", "{tmp}/hdr.png"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
+    "web_export.py": "needs Debian's chromium and minutes of software WebGL; tests/test_web_export.py covers "
+                     "the page in a browser: python benchmarks/web_export.py",
 }
 # Scripts that read data kept beside the repository (../shared), not in it: skipped, with why, in a
 # checkout that lacks it (CI's clone sits beside it).

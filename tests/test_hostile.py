@@ -337,6 +337,17 @@ CASES = [
          lambda t, s, a: ["export", str(a), str(t / "o.ply"), "--motion", str(_ply(t / "b.bvh", BAD_BVH))], "b.bvh"),
     Case("export a frame of an avatar without its sequence",
          lambda t, s, a: ["export", str(a), str(t / "o.ply"), "--frame", "3"], "--motion"),
+    # gma export: a web page
+    Case("export a page over an existing file",
+         lambda t, s, a: ["export", str(a), str(_ply(t / "o.html", "<p>mine</p>"))], "already exists"),
+    Case("export a page of an avatar that does not read",
+         lambda t, s, a: ["export", str(_ply(t / "bad.gma", "not an avatar")), str(t / "o.html")], "bad.gma"),
+    Case("export a page with a motion that does not parse",
+         lambda t, s, a: ["export", str(a), str(t / "o.html"), "--motion", str(_ply(t / "b.bvh", BAD_BVH))], "b.bvh"),
+    Case("export a page with an unknown motion",
+         lambda t, s, a: ["export", str(a), str(t / "o.html"), "--motion", "moonwalk"], "moonwalk"),
+    Case("export a page with --frame", lambda t, s, a: ["export", str(a), str(t / "o.html"), "--frame", "3"],
+         "--frame"),
     # gma render: stills and motion frames
     Case("render a .png of many frames", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png")], "o.png"),
     Case("render --frame without --motion", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png"), "--seconds",

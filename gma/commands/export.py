@@ -4,6 +4,7 @@
     gma export me.gma me_2dgs.ply --format 2dgs --pose tpose
     gma export me.gma me.glb --texture 1024               # posed morphed mesh, UVs + baked texture
     gma export me.gma walk.ply --motion walk.bvh --every 10   # walk_00000.ply, walk_00010.ply, ...
+    gma export me.gma me.html --motion walk --motion turn      # a web page that plays the avatar
 """
 
 from __future__ import annotations
@@ -13,19 +14,21 @@ import sys
 import time
 from pathlib import Path
 
-from gma.core.args import non_negative_int, positive_float, positive_int
+from gma.core.args import non_negative_int, parse_image_size, positive_float, positive_int
 from gma.core.errors import InputError, MissingFileError
 from gma.core.outputs import prepare_output_file
 
-SUFFIXES = (".ply", ".glb", ".obj")
+SUFFIXES = (".ply", ".glb", ".obj", ".html")
 FORMATS = ("3dgs", "2dgs", "mesh")
 
 
 def register(subparsers) -> None:
-    p = subparsers.add_parser("export", help="export an avatar as a Gaussian-splat PLY or a mesh (GLB/OBJ/PLY)",
+    p = subparsers.add_parser("export", help="export an avatar as a Gaussian-splat PLY, a mesh (GLB/OBJ/PLY) or a "
+                              "web page that plays it (HTML)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("avatar", help="fitted avatar .gma")
-    p.add_argument("out", help="output .ply (splats, or a mesh with --format mesh), .glb or .obj (mesh)")
+    p.add_argument("out", help="output .ply (splats, or a mesh with --format mesh), .glb or .obj (mesh), .html "
+                   "(a self-contained page that plays the avatar)")
     p.add_argument("--format", choices=FORMATS, default=None,
                    help="3dgs: INRIA splat layout, three scales (default for .ply); 2dgs: two scales; mesh: the "
                         "morphed body mesh (default for .glb/.obj)")
@@ -35,14 +38,17 @@ def register(subparsers) -> None:
                    help="3dgs: size of each surfel's flat axis in metres (default 1e-4)")
     p.add_argument("--pose", default="canonical", choices=("canonical", "tpose", "apose"),
                    help="named pose when neither --motion nor --frame is given")
-    p.add_argument("--motion", default=None,
-                   help="motion file (.bvh, AMASS/SMPL-X .npz, an Anny motion or sequence body.npz)")
+    p.add_argument("--motion", action="append", default=None,
+                   help="motion file (.bvh, AMASS/SMPL-X .npz, an Anny motion or sequence body.npz); .html: also a "
+                        "built-in motion (walk, turn, wave), repeatable for a picker (default walk)")
     p.add_argument("--frame", type=non_negative_int, default=None,
                    help="this frame of --motion (or of the avatar's fitted sequence)")
     p.add_argument("--every", type=positive_int, default=None,
                    help="every K-th frame of --motion, as OUT_NNNNN.ext (--motion without --frame: every frame)")
     p.add_argument("--texture", type=non_negative_int, default=0,
                    help="mesh: bake the colours into an N×N texture on the body's UVs (0: vertex colours)")
+    p.add_argument("--size", type=parse_image_size, default=None,
+                   help=".html: the view's size in pixels, N or WxH (default: the browser window)")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.set_defaults(func=run)
 
@@ -56,6 +62,15 @@ def run(args: argparse.Namespace) -> int:
     suffix = out.suffix.lower()
     if suffix not in SUFFIXES:
         raise InputError(f"{out}: unknown export format {out.suffix!r}; expected {', '.join(SUFFIXES)}")
+    if suffix == ".html":
+        from gma.commands._export_web import run_web
+
+        return run_web(args)
+    if args.size is not None:
+        raise InputError(f"--size is for .html pages; {out} is not one")
+    if args.motion is not None and len(args.motion) > 1:
+        raise InputError(f"{out}: give one --motion (several are for .html pages)")
+    args.motion = args.motion[0] if args.motion else None
     fmt = args.format or ("3dgs" if suffix == ".ply" else "mesh")
     if fmt != "mesh" and suffix != ".ply":
         raise InputError(f"{out}: --format {fmt} writes a splat .ply")
