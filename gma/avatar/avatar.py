@@ -10,7 +10,9 @@ File layout (one safetensors file; never pickle, so opening a stranger's avatar 
               history = JSON list of edit records, info = JSON dict (fit summary, free-form)
 
 Writes are atomic (temporary file, fsync, rename). A file from a newer format version is refused with
-a message that names the file and both versions.
+a message that names the file and both versions. Every tensor is finite both ways: a file holding a
+NaN or an infinity is refused on reading, and an avatar holding one is never written (an edit or a
+diverged fit cannot produce such a file).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from gma.avatar.model import AvatarModel, DecodedAvatar
 from gma.body import load_body
 from gma.body.registry import BODY_MODELS
 from gma.core.atomic import atomic_write_bytes
-from gma.core.errors import InputError
+from gma.core.checks import require_finite
+from gma.core.errors import InputError, NonFiniteError
 
 __all__ = ["FORMAT_VERSION", "Avatar", "AvatarFileError"]
 
@@ -77,10 +80,15 @@ class Avatar:
         return self.model.decode(layer or self.render_layer).detach()
 
     # -- file IO ---------------------------------------------------------------------------------------
-    def to_bytes(self) -> bytes:
+    def to_bytes(self, where: str = "avatar") -> bytes:
+        """The ``.gma`` file's bytes; :class:`NonFiniteError` (naming ``where`` and the tensor) when a
+        tensor holds a NaN or an infinity, or the expression in ``info`` does."""
         tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
         tensors["rest_vertices"] = self.rest_vertices.contiguous()
         tensors["shape"] = self.shape.float().contiguous()
+        require_finite({_tensor_name(k): v for k, v in tensors.items()}, f"{where}: not written", NonFiniteError)
+        if "expression" in self.info:
+            require_finite({"the expression": self.info["expression"]}, f"{where}: not written", NonFiniteError)
         meta = {"format": AVATAR_FORMAT, "version": str(FORMAT_VERSION), "body": self.body_name,
                 "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
                 "info": json.dumps(self.info)}
@@ -89,7 +97,7 @@ class Avatar:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the avatar to ``path`` atomically; returns the path."""
         path = Path(path)
-        atomic_write_bytes(path, self.to_bytes())
+        atomic_write_bytes(path, self.to_bytes(str(path)))
         return path
 
     @staticmethod
@@ -111,6 +119,7 @@ class Avatar:
             raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from None
         if not isinstance(history, list) or not isinstance(info, dict):
             raise AvatarFileError(f"{path}: bad avatar metadata (history must be a list, info an object)")
+        _check_info_expression(info, path)
         if meta["body"] not in BODY_MODELS:
             raise AvatarFileError(f"{path}: bound to body model {meta['body']!r}, which GMA does not know "
                                   f"({', '.join(BODY_MODELS)})")
@@ -132,6 +141,21 @@ class Avatar:
         except RuntimeError as exc:
             raise AvatarFileError(f"{path}: tensors do not match the avatar config ({exc})") from exc
         return Avatar(model, meta["body"], tensors["shape"].float(), rest, history, info)
+
+
+def _tensor_name(key: str) -> str:
+    """The name a user knows a stored tensor by (``model.f_tex`` -> ``f_tex``)."""
+    return key[len("model."):] if key.startswith("model.") else key
+
+
+def _check_info_expression(info: dict, path: Path) -> None:
+    """The default expression a body edit stores in ``info``: a list of finite numbers (JSON lets NaN in)."""
+    if "expression" not in info:
+        return
+    expr = info["expression"]
+    if not isinstance(expr, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in expr):
+        raise AvatarFileError(f"{path}: bad avatar metadata (the expression must be a list of numbers)")
+    require_finite({"the expression in its metadata": expr}, str(path), AvatarFileError)
 
 
 def canonical_safetensors(data: bytes) -> bytes:
@@ -173,4 +197,5 @@ def read_tagged_file(path: Path, formats: dict[str, int], what: str) -> tuple[di
                               f"({formats[kind]}); update GMA to open it")
     if version < 1:
         raise AvatarFileError(f"{path}: bad format version {version}")
+    require_finite({_tensor_name(k): v for k, v in tensors.items()}, str(path), AvatarFileError)
     return tensors, meta
