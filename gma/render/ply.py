@@ -150,10 +150,12 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
         colors = col("red", "green", "blue") / 255.0
     else:
         colors = np.full((count, 3), 0.7)
-    opacities = 1.0 / (1.0 + np.exp(-np.asarray(columns["opacity"], np.float64)))
-    out = {"means": means, "quats": quats, "scales": np.exp(log_scales), "opacities": opacities, "colors": colors}
-    out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
-    # Finite properties can still overflow once activated (a log scale of 1000).
+    # Finite properties can still overflow once activated (a log scale of 1000): checked below, in one
+    # line, instead of numpy's overflow warnings.
+    with np.errstate(over="ignore"):
+        opacities = 1.0 / (1.0 + np.exp(-np.asarray(columns["opacity"], np.float64)))
+        out = {"means": means, "quats": quats, "scales": np.exp(log_scales), "opacities": opacities, "colors": colors}
+        out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
     require_finite({f"{k} (activated)": v for k, v in out.items()}, f"{path}: values too large", InputError)
     return out
 
