@@ -171,6 +171,41 @@ def _avatar_without_body(tmp, seq_dir, avatar):
     return ["eval", str(bad), str(seq_dir)]
 
 
+def _poisoned_avatar(avatar: Path, to: Path, key: str = "model.f_tex", value: float = float("nan"),
+                     count: int = 812, info: dict | None = None) -> Path:
+    """A copy of ``avatar`` whose tensor ``key`` holds ``count`` values ``value`` (NaN, inf), written past
+    GMA's own checks (as another tool or a bit flip would); ``info`` replaces its info metadata."""
+    from safetensors import safe_open
+    from safetensors.torch import save
+
+    with safe_open(str(avatar), "pt") as f:
+        meta = dict(f.metadata())
+        tensors = {k: f.get_tensor(k).clone() for k in f.keys()}
+    tensors[key].view(-1)[:count] = value
+    if info is not None:
+        meta["info"] = json.dumps(info)
+    to.write_bytes(save(tensors, metadata=meta))
+    return to
+
+
+def _edit(avatar, tmp, *extra: str) -> list[str]:
+    return ["edit", str(avatar), "-o", str(tmp / "out.gma"), "--view-size", "64", *extra]
+
+
+def _nan_ply(tmp: Path, row: bytes) -> Path:
+    """An ASCII splat PLY of one vertex with the values ``row`` (x y z scale_0 scale_1 rot_0..3 opacity)."""
+    return _ply(tmp / "n.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_PROPS + "end_header\n", row + b"\n")
+
+
+def _bvh(tmp: Path, frame_time: str = "0.1", offset: str = "0 0 0", values: str = "0 0 0\n0 0 0") -> Path:
+    """A one-joint BVH of two frames, with the given frame time, root OFFSET and channel values."""
+    return _ply(tmp / "b.bvh", f"HIERARCHY\nROOT Hips\n{{\nOFFSET {offset}\nCHANNELS 3 Zrotation Xrotation "
+                               f"Yrotation\n}}\nMOTION\nFrames: 2\nFrame Time: {frame_time}\n{values}\n")
+
+
+FIFTY_TWO = ",".join(["0"] * 51)  # all but one facial action, for --expression cases
+
+
 BAD_BVH = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n0\n"
 
 
@@ -322,6 +357,139 @@ CASES = [
     Case("render a .png of many frames", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png")], "o.png"),
     Case("render --frame without --motion", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png"), "--seconds",
                                                              "0", "--frame", "3"], "--frame"),
+    # Non-finite avatars (issue 65): refused on reading, naming the tensor, by every command
+    Case("edit an avatar of NaN features",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma"), t, "--select", "region:torso", "--paint", "red"),
+         "f_tex holds 812 NaN values"),
+    Case("edit an avatar of NaN decoder weights",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", "model.T_color.0.weight"), t, "--shape",
+                               "0.5,0.5,0.5,0.5,0.5,0.5"), "T_color.0.weight holds"),
+    Case("edit an avatar of infinite geometry features",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", "model.f_geo", float("inf"), 1), t, "--history"),
+         "f_geo holds 1 infinite value"),
+    Case("edit an avatar whose stored expression is NaN",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", count=0, info={"expression": [float("nan")] * 52}),
+                               t, "--history"), "expression"),
+    Case("edit --transfer from a NaN donor",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--transfer", str(_poisoned_avatar(a, t / "d.gma"))),
+         "d.gma: f_tex"),
+    Case("export an avatar of NaN features",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma")), str(t / "o.ply")], "f_tex holds"),
+    Case("export an avatar of NaN decoder weights as a mesh",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma", "model.F_coarse.2.bias")), str(t / "o.glb")],
+         "F_coarse.2.bias holds"),
+    Case("export an avatar of an infinite body shape",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma", "shape", float("inf"), 1)), str(t / "o.ply")],
+         "shape holds 1 infinite value"),
+    Case("eval an avatar of NaN features",
+         lambda t, s, a: ["eval", str(_poisoned_avatar(a, t / "n.gma")), str(s)], "f_tex holds"),
+    Case("render an avatar of NaN features",
+         lambda t, s, a: ["render", str(_poisoned_avatar(a, t / "n.gma")), "-o", str(t / "o.mp4")], "f_tex holds"),
+    Case("view an avatar of NaN features", lambda t, s, a: ["view", str(_poisoned_avatar(a, t / "n.gma"))],
+         "f_tex holds"),
+    # Splat PLYs of NaN / inf: refused naming the property
+    Case("render-ply a NaN position",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 nan 0 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'z' holds 1 NaN value"),
+    Case("render-ply a NaN rotation (was taken for the identity)",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 0 0 nan 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'rot_0'"),
+    Case("render-ply an infinite scale",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 inf 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'scale_0' holds 1 infinite value"),
+    Case("render-ply a scale that overflows",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 900 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "values too large"),
+    Case("render a NaN splat PLY",
+         lambda t, s, a: ["render", str(_nan_ply(t, b"0 0 0 0 0 1 0 0 0 nan")), "-o", str(t / "o.mp4")],
+         "property 'opacity'"),
+    Case("view a NaN splat PLY", lambda t, s, a: ["view", str(_nan_ply(t, b"nan 0 0 0 0 1 0 0 0 0"))],
+         "property 'x'"),
+    # gma edit: body values against the body's ranges (Anny: [0, 1])
+    Case("edit --shape with a NaN", lambda t, s, a: _edit(a, t, "--shape", "nan,0.5,0.5,0.5,0.5,0.5"),
+         "'gender' is nan, not a finite number in [0, 1]"),
+    Case("edit --shape out of range", lambda t, s, a: _edit(a, t, "--shape", "5,5,5,5,5,5"),
+         "'gender' is 5, not a finite number in [0, 1]"),
+    Case("edit --shape with an infinity", lambda t, s, a: _edit(a, t, "--shape", "0.5,0.5,0.5,0.5,0.5,inf"),
+         "not a finite number in [0, 1]"),
+    Case("edit --shape of two values", lambda t, s, a: _edit(a, t, "--shape", "0.5,0.5"), "shape"),
+    Case("edit --shape of words", lambda t, s, a: _edit(a, t, "--shape", "tall"), "--shape"),
+    Case("edit --expression of one value", lambda t, s, a: _edit(a, t, "--expression", "2"), "expression"),
+    Case("edit --expression out of range", lambda t, s, a: _edit(a, t, "--expression", FIFTY_TWO + ",2"),
+         "is 2, not a finite number in [0, 1]"),
+    Case("edit --expression with a NaN", lambda t, s, a: _edit(a, t, "--expression", FIFTY_TWO + ",nan"),
+         "is nan, not a finite number in [0, 1]"),
+    Case("edit --shape with a paint: checked before the paint",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--paint", "red", "--shape=-1,0,0,0,0,0"),
+         "'gender' is -1"),
+    # gma edit: sizes, rotations, tolerances, counts
+    Case("edit --stamp --size 1e9m", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "1e9m"),
+         "--size 1e9m: must lie in (0, 4] m"),
+    Case("edit --stamp --size infm", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "infm"),
+         "--size"),
+    Case("edit --stamp --size nancm", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "nancm"),
+         "--size"),
+    Case("edit --stamp --size 1e7px", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "1e7px"),
+         "(0, 16384] px"),
+    Case("edit --stamp --rotation nan", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--rotation", "nan"),
+         "--rotation: must lie in [-360, 360] degrees"),
+    Case("edit --stamp --rotation 1e9", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--rotation", "1e9"),
+         "--rotation"),
+    Case("edit --stamp --at nan,3", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--at", "nan,3"), "--at"),
+    Case("edit --wand-tolerance nan",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@32,32", "--wand-tolerance", "nan", "--paint", "red"),
+         "--wand-tolerance"),
+    Case("edit --wand-tolerance 5",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@32,32", "--wand-tolerance", "5", "--paint", "red"),
+         "--wand-tolerance: must lie in [0, 1.73205]"),
+    Case("edit --grow -1", lambda t, s, a: _edit(a, t, "--select", "all", "--grow", "-1", "--paint", "red"),
+         "--grow: must lie in [0, 100] rings"),
+    Case("edit --shrink 1000000", lambda t, s, a: _edit(a, t, "--select", "all", "--shrink", "1000000", "--paint",
+                                                         "red"), "--shrink"),
+    Case("edit --view-size 100000", lambda t, s, a: _edit(a, t, "--select", "box:front@0,0,9,9", "--paint", "red",
+                                                           "--view-size", "100000"), "--view-size"),
+    Case("edit a brush of NaN radius", lambda t, s, a: _edit(a, t, "--select", "brush:front@32,32,nan", "--paint",
+                                                              "red"), "brush radius"),
+    Case("edit a brush of huge radius", lambda t, s, a: _edit(a, t, "--select", "brush:front@32,32,1e12", "--paint",
+                                                               "red"), "brush radius: must lie in (0, 16384] px"),
+    Case("edit a box with an infinite corner",
+         lambda t, s, a: _edit(a, t, "--select", "box:front@0,0,inf,9", "--paint", "red"), "box"),
+    Case("edit a wand at a NaN pixel",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@nan,3", "--paint", "red"), "wand pixel"),
+    Case("edit --paint of a NaN colour",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--paint", "nan,0,0"), "three values in [0, 1]"),
+    # gma import motion: non-finite values name the input, not the output
+    Case("import motion from a BVH of NaN angles",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, values="0 nan 0\n0 0 0")), str(t / "m.npz")], "b.bvh"),
+    Case("import motion from a BVH of infinite frame time",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, frame_time="inf")), str(t / "m.npz")], "b.bvh"),
+    Case("import motion from a BVH of NaN offset",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, offset="0 nan 0")), str(t / "m.npz")], "non-finite OFFSET"),
+    Case("import motion from an npz of NaN poses",
+         lambda t, s, a: ["import", "motion", str(_npz(t / "p.npz", poses=np.full((3, 66), np.nan),
+                                                       trans=np.zeros((3, 3)))), str(t / "m.npz")], "p.npz"),
+    Case("import motion from an npz of infinite frame rate",
+         lambda t, s, a: ["import", "motion", str(_npz(t / "p.npz", poses=np.zeros((3, 66)), trans=np.zeros((3, 3)),
+                                                       mocap_framerate=np.inf)), str(t / "m.npz")], "p.npz"),
+    Case("import motion --fps nan", lambda t, s, a: ["import", "motion", str(_bvh(t)), str(t / "m.npz"), "--fps",
+                                                      "nan"], "--fps", argparse=True),
+    # gma batch: refused before Ray starts or anything is written
+    Case("batch --decoders of NaN weights",
+         lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--decoders",
+                          str(_poisoned_avatar(a, t / "dec.gma", "model.T_color.0.weight"))], "T_color.0.weight holds"),
+    Case("batch --decoders of random bytes",
+         lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--decoders", str(_ply(t / "dec.gma", "garbage"))],
+         "dec.gma"),
+    Case("batch --lr-features nan", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--lr-features", "nan"],
+         "--lr-features"),
+    Case("batch --weights2.l1 inf", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--weights2.l1", "inf"],
+         "--weights2.l1"),
+    Case("batch a missing sequence", lambda t, s, a: ["batch", str(t / "gone"), "-o", str(t / "b")], "gone"),
+    Case("batch an unknown step", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--steps", "fit,fly"],
+         "--steps"),
+    Case("batch one sequence twice", lambda t, s, a: ["batch", str(s), str(s), "-o", str(t / "b")], "given twice"),
+    Case("fit --lr-decoders nan", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--lr-decoders", "nan"],
+         "--lr-decoders"),
 ]
 
 
