@@ -704,27 +704,42 @@ def test_random_edit_arguments_exit_0_with_a_finite_avatar_or_2_with_one_line(av
     assert 0 in codes and 2 in codes, codes  # the sweep reaches both ends
 
 
-def test_a_diverging_fit_stops_with_one_line_and_resumes(seq_dir, tmp_path, capsys, monkeypatch):
-    """A loss that turns NaN stops gma fit with one line naming the step and the last good checkpoint, which
+@pytest.mark.parametrize("what", ["loss", "parameters"])
+def test_a_diverging_fit_stops_with_one_line_and_resumes(what, seq_dir, tmp_path, capsys, monkeypatch):
+    """A loss that turns NaN (at step 4), or parameters that do while the loss stays finite (found by the
+    checkpoint of step 3), stop gma fit with one line naming the step and the last good checkpoint, which
     --resume continues from."""
-    from gma.avatar import Avatar
-    from gma.train.trainer import Trainer
+    import torch
 
-    real_loss, calls = Trainer._loss, []
+    import gma.train.trainer as trainer
+    from gma.avatar import Avatar
+
+    real_loss, real_save, calls = trainer.Trainer._loss, trainer.save_checkpoint, []
 
     def loss_nan_at_step_4(self, *args, **kwargs):
         loss, rec, marks = real_loss(self, *args, **kwargs)
-        calls.append(1)
-        return (loss * float("nan") if len(calls) == 4 else loss), rec, marks
+        calls.append("loss")
+        return (loss * float("nan") if calls.count("loss") == 4 else loss), rec, marks
 
-    monkeypatch.setattr(Trainer, "_loss", loss_nan_at_step_4)
+    def save_nan_at_second_checkpoint(path, net, opt, meta):
+        calls.append("save")
+        if calls.count("save") == 2:
+            with torch.no_grad():
+                next(net.parameters()).view(-1)[0] = float("nan")
+        real_save(path, net, opt, meta)
+
+    if what == "loss":
+        monkeypatch.setattr(trainer.Trainer, "_loss", loss_nan_at_step_4)
+    else:
+        monkeypatch.setattr(trainer, "save_checkpoint", save_nan_at_second_checkpoint)
     out = tmp_path / "o.gma"
     argv = ["fit", str(seq_dir), "-o", str(out), "--quiet", "--stage1-steps", "3", "--stage2-steps", "2",
             "--checkpoint-every", "2", "--preview-every", "0"]
     assert main(argv) == 2
     err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
-    assert len(err) == 1 and "the fit diverged: the loss is nan at step 4" in err[0], err
-    assert "last good checkpoint (step 3)" in err[0], err
+    expected = ("the loss is nan at step 4", "(step 3)") if what == "loss" else ("not finite", "(step 2)")
+    assert len(err) == 1 and "the fit diverged: " in err[0] and expected[0] in err[0], err
+    assert f"last good checkpoint {expected[1]}" in err[0], err
     assert not out.exists() and (tmp_path / "o.fit" / "checkpoint.safetensors").is_file()
     monkeypatch.undo()
     assert main([*argv, "--resume"]) == 0

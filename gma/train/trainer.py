@@ -315,13 +315,14 @@ class Trainer:
             rec["subject"] = subject
         return loss, rec, marks
 
-    def _diverged_message(self, step: int, stage: Stage, loss: float, ckpt: Path, saved_step: int | None) -> str:
-        """One line for a fit whose loss turned NaN or infinite: where, and what is kept to resume from.
-        The parameters of the step are not saved (they made the loss non-finite); the checkpoint on disk
-        is from before, and a save never writes non-finite values, so it is a good one."""
+    def _diverged_message(self, what: str, step: int, stage: Stage, ckpt: Path, saved_step: int | None) -> str:
+        """One line for a fit that diverged (``what``: the loss or the parameters turned NaN or infinite at
+        ``step``, counted from 1): where, and what is kept to resume from. The parameters of that step are
+        not saved; the checkpoint on disk is from before, and a save never writes non-finite values, so it
+        is a good one."""
         kept = (f"the last good checkpoint (step {saved_step}) is kept in {ckpt} for --resume"
                 if saved_step is not None else "no checkpoint was written yet")
-        return f"{self.out}: the fit diverged: the loss is {loss} at step {step + 1} ({stage.name}); {kept}"
+        return f"{self.out}: the fit diverged: {what} at step {step} ({stage.name}); {kept}"
 
     def _aligns_poses(self) -> bool:
         """Whether the fit runs the pose alignment pass: poses refined, ``--pose.align`` > 0, and a stage 1
@@ -417,7 +418,8 @@ class Trainer:
             loss_value = float(loss.detach())
             if not math.isfinite(loss_value):
                 bar.close()
-                raise NonFiniteError(self._diverged_message(step, stage, loss_value, ckpt, saved_step))
+                raise NonFiniteError(self._diverged_message(f"the loss is {loss_value}", step + 1, stage, ckpt,
+                                                            saved_step))
             tb = time.perf_counter()
             loss.backward()
             tc = time.perf_counter()
@@ -444,7 +446,12 @@ class Trainer:
                 if meta["stage"] != si:  # the next stage starts with a fresh optimiser
                     opt = self._optimizer(self.stages[meta["stage"]])
                     stage_idx = meta["stage"]
-                save_checkpoint(ckpt, self.net, opt, meta)
+                try:
+                    save_checkpoint(ckpt, self.net, opt, meta)
+                except NonFiniteError as exc:  # a finite loss, but this step's update was not
+                    bar.close()
+                    raise NonFiniteError(self._diverged_message(f"the parameters are not finite ({exc})", step,
+                                                                stage, ckpt, saved_step)) from None
                 saved_step = step
             if self.cfg.preview_every and step % self.cfg.preview_every == 0:
                 self._preview(step)
