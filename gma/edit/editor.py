@@ -22,7 +22,7 @@ import torch
 from gma.edit.errors import EditError
 from gma.edit.history import apply_values, make_record, record_face_ids, restore_record
 from gma.edit.invert import InvertConfig
-from gma.edit.limits import MAX_COLOR_TOLERANCE, MAX_TEX_TOLERANCE, check_number, check_pixel
+from gma.edit.limits import MAX_COLOR_TOLERANCE, MAX_SCREEN_PIXELS, MAX_TEX_TOLERANCE, check_number, check_pixel
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
 from gma.edit.selection import FaceGraph, Selection, mirror_map
@@ -177,6 +177,9 @@ class Editor:
         # Only faces near the image's footprint can be hit: placing and projecting every surfel of the
         # body would cost more than the solve.
         cx, cy, size_px = resolve_placement(view, placement, cand)
+        if size_px > MAX_SCREEN_PIXELS:  # a size in metres, seen from very close
+            raise EditError(f"the stamp would be {size_px:.0f} px wide in this view (at most {MAX_SCREEN_PIXELS:.0f}): "
+                            "give a smaller size or a camera further away")
         ih, iw = image.shape[:2]
         reach = 0.5 * size_px * math.hypot(ih, iw) / max(ih, iw) + 4.0  # half-diagonal + a surfel's spread
         near = np.hypot(view.px[cand.numpy(), 0] - cx, view.px[cand.numpy(), 1] - cy) <= reach
