@@ -186,6 +186,41 @@ def _avatar_with_bad_seen_record(tmp, seq_dir, avatar):
     return ["edit", str(bad), "-o", str(tmp / "out.gma"), "--select", "unseen", "--paint", "red"]
 
 
+def _poisoned_avatar(avatar: Path, to: Path, key: str = "model.f_tex", value: float = float("nan"),
+                     count: int = 812, info: dict | None = None) -> Path:
+    """A copy of ``avatar`` whose tensor ``key`` holds ``count`` values ``value`` (NaN, inf), written past
+    GMA's own checks (as another tool or a bit flip would); ``info`` replaces its info metadata."""
+    from safetensors import safe_open
+    from safetensors.torch import save
+
+    with safe_open(str(avatar), "pt") as f:
+        meta = dict(f.metadata())
+        tensors = {k: f.get_tensor(k).clone() for k in f.keys()}
+    tensors[key].view(-1)[:count] = value
+    if info is not None:
+        meta["info"] = json.dumps(info)
+    to.write_bytes(save(tensors, metadata=meta))
+    return to
+
+
+def _edit(avatar, tmp, *extra: str) -> list[str]:
+    return ["edit", str(avatar), "-o", str(tmp / "out.gma"), "--view-size", "64", *extra]
+
+
+def _nan_ply(tmp: Path, row: bytes) -> Path:
+    """An ASCII splat PLY of one vertex with the values ``row`` (x y z scale_0 scale_1 rot_0..3 opacity)."""
+    return _ply(tmp / "n.ply", "ply\nformat ascii 1.0\nelement vertex 1\n" + PLY_PROPS + "end_header\n", row + b"\n")
+
+
+def _bvh(tmp: Path, frame_time: str = "0.1", offset: str = "0 0 0", values: str = "0 0 0\n0 0 0") -> Path:
+    """A one-joint BVH of two frames, with the given frame time, root OFFSET and channel values."""
+    return _ply(tmp / "b.bvh", f"HIERARCHY\nROOT Hips\n{{\nOFFSET {offset}\nCHANNELS 3 Zrotation Xrotation "
+                               f"Yrotation\n}}\nMOTION\nFrames: 2\nFrame Time: {frame_time}\n{values}\n")
+
+
+FIFTY_TWO = ",".join(["0"] * 51)  # all but one facial action, for --expression cases
+
+
 BAD_BVH = "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n0\n"
 
 
@@ -352,6 +387,139 @@ CASES = [
     Case("render a .png of many frames", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png")], "o.png"),
     Case("render --frame without --motion", lambda t, s, a: ["render", str(a), "-o", str(t / "o.png"), "--seconds",
                                                              "0", "--frame", "3"], "--frame"),
+    # Non-finite avatars (issue 65): refused on reading, naming the tensor, by every command
+    Case("edit an avatar of NaN features",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma"), t, "--select", "region:torso", "--paint", "red"),
+         "f_tex holds 812 NaN values"),
+    Case("edit an avatar of NaN decoder weights",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", "model.T_color.0.weight"), t, "--shape",
+                               "0.5,0.5,0.5,0.5,0.5,0.5"), "T_color.0.weight holds"),
+    Case("edit an avatar of infinite geometry features",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", "model.f_geo", float("inf"), 1), t, "--history"),
+         "f_geo holds 1 infinite value"),
+    Case("edit an avatar whose stored expression is NaN",
+         lambda t, s, a: _edit(_poisoned_avatar(a, t / "n.gma", count=0, info={"expression": [float("nan")] * 52}),
+                               t, "--history"), "expression"),
+    Case("edit --transfer from a NaN donor",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--transfer", str(_poisoned_avatar(a, t / "d.gma"))),
+         "d.gma: f_tex"),
+    Case("export an avatar of NaN features",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma")), str(t / "o.ply")], "f_tex holds"),
+    Case("export an avatar of NaN decoder weights as a mesh",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma", "model.F_coarse.2.bias")), str(t / "o.glb")],
+         "F_coarse.2.bias holds"),
+    Case("export an avatar of an infinite body shape",
+         lambda t, s, a: ["export", str(_poisoned_avatar(a, t / "n.gma", "shape", float("inf"), 1)), str(t / "o.ply")],
+         "shape holds 1 infinite value"),
+    Case("eval an avatar of NaN features",
+         lambda t, s, a: ["eval", str(_poisoned_avatar(a, t / "n.gma")), str(s)], "f_tex holds"),
+    Case("render an avatar of NaN features",
+         lambda t, s, a: ["render", str(_poisoned_avatar(a, t / "n.gma")), "-o", str(t / "o.mp4")], "f_tex holds"),
+    Case("view an avatar of NaN features", lambda t, s, a: ["view", str(_poisoned_avatar(a, t / "n.gma"))],
+         "f_tex holds"),
+    # Splat PLYs of NaN / inf: refused naming the property
+    Case("render-ply a NaN position",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 nan 0 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'z' holds 1 NaN value"),
+    Case("render-ply a NaN rotation (was taken for the identity)",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 0 0 nan 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'rot_0'"),
+    Case("render-ply an infinite scale",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 inf 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "property 'scale_0' holds 1 infinite value"),
+    Case("render-ply a scale that overflows",
+         lambda t, s, a: ["render-ply", str(_nan_ply(t, b"0 0 0 900 0 1 0 0 0 0")), "-o", str(t / "o.png")],
+         "values too large"),
+    Case("render a NaN splat PLY",
+         lambda t, s, a: ["render", str(_nan_ply(t, b"0 0 0 0 0 1 0 0 0 nan")), "-o", str(t / "o.mp4")],
+         "property 'opacity'"),
+    Case("view a NaN splat PLY", lambda t, s, a: ["view", str(_nan_ply(t, b"nan 0 0 0 0 1 0 0 0 0"))],
+         "property 'x'"),
+    # gma edit: body values against the body's ranges (Anny: [0, 1])
+    Case("edit --shape with a NaN", lambda t, s, a: _edit(a, t, "--shape", "nan,0.5,0.5,0.5,0.5,0.5"),
+         "'gender' is nan, not a finite number in [0, 1]"),
+    Case("edit --shape out of range", lambda t, s, a: _edit(a, t, "--shape", "5,5,5,5,5,5"),
+         "'gender' is 5, not a finite number in [0, 1]"),
+    Case("edit --shape with an infinity", lambda t, s, a: _edit(a, t, "--shape", "0.5,0.5,0.5,0.5,0.5,inf"),
+         "not a finite number in [0, 1]"),
+    Case("edit --shape of two values", lambda t, s, a: _edit(a, t, "--shape", "0.5,0.5"), "shape"),
+    Case("edit --shape of words", lambda t, s, a: _edit(a, t, "--shape", "tall"), "--shape"),
+    Case("edit --expression of one value", lambda t, s, a: _edit(a, t, "--expression", "2"), "expression"),
+    Case("edit --expression out of range", lambda t, s, a: _edit(a, t, "--expression", FIFTY_TWO + ",2"),
+         "is 2, not a finite number in [0, 1]"),
+    Case("edit --expression with a NaN", lambda t, s, a: _edit(a, t, "--expression", FIFTY_TWO + ",nan"),
+         "is nan, not a finite number in [0, 1]"),
+    Case("edit --shape with a paint: checked before the paint",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--paint", "red", "--shape=-1,0,0,0,0,0"),
+         "'gender' is -1"),
+    # gma edit: sizes, rotations, tolerances, counts
+    Case("edit --stamp --size 1e9m", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "1e9m"),
+         "--size 1e9m: must lie in (0, 4] m"),
+    Case("edit --stamp --size infm", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "infm"),
+         "--size"),
+    Case("edit --stamp --size nancm", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "nancm"),
+         "--size"),
+    Case("edit --stamp --size 1e7px", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--size", "1e7px"),
+         "(0, 16384] px"),
+    Case("edit --stamp --rotation nan", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--rotation", "nan"),
+         "--rotation: must lie in [-360, 360] degrees"),
+    Case("edit --stamp --rotation 1e9", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--rotation", "1e9"),
+         "--rotation"),
+    Case("edit --stamp --at nan,3", lambda t, s, a: _edit(a, t, "--stamp", "shape:circle", "--at", "nan,3"), "--at"),
+    Case("edit --wand-tolerance nan",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@32,32", "--wand-tolerance", "nan", "--paint", "red"),
+         "--wand-tolerance"),
+    Case("edit --wand-tolerance 5",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@32,32", "--wand-tolerance", "5", "--paint", "red"),
+         "--wand-tolerance: must lie in [0, 1.73205]"),
+    Case("edit --grow -1", lambda t, s, a: _edit(a, t, "--select", "all", "--grow", "-1", "--paint", "red"),
+         "--grow: must lie in [0, 100] rings"),
+    Case("edit --shrink 1000000", lambda t, s, a: _edit(a, t, "--select", "all", "--shrink", "1000000", "--paint",
+                                                         "red"), "--shrink"),
+    Case("edit --view-size 100000", lambda t, s, a: _edit(a, t, "--select", "box:front@0,0,9,9", "--paint", "red",
+                                                           "--view-size", "100000"), "--view-size"),
+    Case("edit a brush of NaN radius", lambda t, s, a: _edit(a, t, "--select", "brush:front@32,32,nan", "--paint",
+                                                              "red"), "brush radius"),
+    Case("edit a brush of huge radius", lambda t, s, a: _edit(a, t, "--select", "brush:front@32,32,1e12", "--paint",
+                                                               "red"), "brush radius: must lie in (0, 16384] px"),
+    Case("edit a box with an infinite corner",
+         lambda t, s, a: _edit(a, t, "--select", "box:front@0,0,inf,9", "--paint", "red"), "box"),
+    Case("edit a wand at a NaN pixel",
+         lambda t, s, a: _edit(a, t, "--select", "wand:front@nan,3", "--paint", "red"), "wand pixel"),
+    Case("edit --paint of a NaN colour",
+         lambda t, s, a: _edit(a, t, "--select", "region:torso", "--paint", "nan,0,0"), "three values in [0, 1]"),
+    # gma import motion: non-finite values name the input, not the output
+    Case("import motion from a BVH of NaN angles",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, values="0 nan 0\n0 0 0")), str(t / "m.npz")], "b.bvh"),
+    Case("import motion from a BVH of infinite frame time",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, frame_time="inf")), str(t / "m.npz")], "b.bvh"),
+    Case("import motion from a BVH of NaN offset",
+         lambda t, s, a: ["import", "motion", str(_bvh(t, offset="0 nan 0")), str(t / "m.npz")], "non-finite OFFSET"),
+    Case("import motion from an npz of NaN poses",
+         lambda t, s, a: ["import", "motion", str(_npz(t / "p.npz", poses=np.full((3, 66), np.nan),
+                                                       trans=np.zeros((3, 3)))), str(t / "m.npz")], "p.npz"),
+    Case("import motion from an npz of infinite frame rate",
+         lambda t, s, a: ["import", "motion", str(_npz(t / "p.npz", poses=np.zeros((3, 66)), trans=np.zeros((3, 3)),
+                                                       mocap_framerate=np.inf)), str(t / "m.npz")], "p.npz"),
+    Case("import motion --fps nan", lambda t, s, a: ["import", "motion", str(_bvh(t)), str(t / "m.npz"), "--fps",
+                                                      "nan"], "--fps", argparse=True),
+    # gma batch: refused before Ray starts or anything is written
+    Case("batch --decoders of NaN weights",
+         lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--decoders",
+                          str(_poisoned_avatar(a, t / "dec.gma", "model.T_color.0.weight"))], "T_color.0.weight holds"),
+    Case("batch --decoders of random bytes",
+         lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--decoders", str(_ply(t / "dec.gma", "garbage"))],
+         "dec.gma"),
+    Case("batch --lr-features nan", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--lr-features", "nan"],
+         "--lr-features"),
+    Case("batch --weights2.l1 inf", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--weights2.l1", "inf"],
+         "--weights2.l1"),
+    Case("batch a missing sequence", lambda t, s, a: ["batch", str(t / "gone"), "-o", str(t / "b")], "gone"),
+    Case("batch an unknown step", lambda t, s, a: ["batch", str(s), "-o", str(t / "b"), "--steps", "fit,fly"],
+         "--steps"),
+    Case("batch one sequence twice", lambda t, s, a: ["batch", str(s), str(s), "-o", str(t / "b")], "given twice"),
+    Case("fit --lr-decoders nan", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--lr-decoders", "nan"],
+         "--lr-decoders"),
 ]
 
 
@@ -502,3 +670,153 @@ def test_outputs_respect_the_umask(tmp_path):
     finally:
         os.umask(old)
     assert (tmp_path / "f.bin").stat().st_mode & 0o777 == 0o644
+
+
+# -- a randomised sweep of gma edit's arguments ----------------------------------------------------------
+# (valid, invalid) values per argument: each run draws an invalid one with probability SWEEP_BAD.
+SWEEP_BAD = 0.12
+# Valid selections are kept small (a paint solve costs in proportion to the faces it touches).
+SWEEP_SELECTS = (["few.json", "box:front@31,12,32,13", "brush:front@32,12,1.5", "wand:front@32,20"],
+                 ["region:elbows", "region:", "box:top@1,1,2,2", "box:front@1,2,3", "box:front@0,0,inf,9",
+                  "brush:left@32,32,-4", "brush:front@32,32,nan", "brush:right@32,32,1e9", "wand:front@0,0",
+                  "wand:front@nan,1", "wand:front", "nothing.txt", "missing.json", "selection.json"])
+SWEEP_COLOURS = (["red", "#c03030", "#fff", "0.2,0.4,0.6", "black"], ["1.5,0,0", "nan,0,0", "", "#12", "chartreuse",
+                                                                     "1,1"])
+SWEEP_SIZES = (["0.15m", "15cm", "40px", "3m"], ["0m", "-1cm", "1e9m", "infm", "12", "m", "1e7px", "nanmm"])
+SWEEP_ROTATIONS = (["0", "45", "-90", "359"], ["-720", "nan", "1e9", "-inf"])
+SWEEP_VIEWS = (["front", "back", "left", "right"], ["top", ""])
+SWEEP_CAMERAS = (["good.json"], ["nan_k.json", "away.json", "garbage.json", "none.json"])
+SWEEP_STAMPS = (["shape:circle", "shape:ring", "shape:square"], ["shape:star", "missing.png"])
+SWEEP_SHAPES = (["0.5,0.5,0.5,0.5,0.7,0.5", "0,1,0,1,0,1"], ["nan,0.5,0.5,0.5,0.5,0.5", "5,5,5,5,5,5", "0.5",
+                                                           "-1,0,0,0,0,0", "a,b"])
+SWEEP_EXPRESSIONS = ([",".join(["0.2"] * 52)], [",".join(["0"] * 51 + ["nan"]), "2", ",".join(["1.5"] * 52)])
+SWEEP_VIEW_SIZES = (["64", "48"], ["8", "100000"])
+SWEEP_RINGS = (["0", "1", "2"], ["-1", "500"])
+SWEEP_TOLERANCES = (["0", "0.001"], ["5", "nan"])  # an unfitted avatar is one colour: 0.1 takes half of it
+
+
+def _sweep_files(tmp: Path) -> None:
+    """The cameras and selection file the sweep's arguments name."""
+    from gma.core.camera import Camera
+
+    good = Camera.look_at((0.0, -3.0, 0.9), (0.0, 0.0, 0.9), up=(0.0, 0.0, 1.0), width=64, height=64).to_json()
+    (tmp / "good.json").write_text(json.dumps(good))
+    (tmp / "nan_k.json").write_text(json.dumps(good | {"K": [[float("nan"), 0, 32], [0, 50, 32], [0, 0, 1]]}))
+    away = Camera.look_at((0.0, 3.0, 0.9), (0.0, 6.0, 0.9), up=(0.0, 0.0, 1.0), width=64, height=64).to_json()
+    (tmp / "away.json").write_text(json.dumps(away))
+    (tmp / "garbage.json").write_text("{ not json")
+    selection = {"format": "gma-selection", "version": 1, "body_model": "anny", "num_faces": 27420,
+                 "faces": list(range(0, 2000, 100))}
+    (tmp / "few.json").write_text(json.dumps(selection))
+    (tmp / "selection.json").write_text(json.dumps(selection | {"num_faces": 10}))  # made on another mesh
+
+
+def _sweep_argv(rng: np.random.Generator, avatar: Path, out: Path) -> list[str]:
+    """One random gma edit command line: each argument valid, or (sometimes) not."""
+    def pick(values) -> str:
+        valid, invalid = values
+        options = invalid if rng.random() < SWEEP_BAD else valid
+        return str(options[rng.integers(len(options))])
+
+    argv = ["edit", str(avatar), "-o", str(out), "--view-size", pick(SWEEP_VIEW_SIZES)]
+    op = ["paint", "stamp", "body"][rng.integers(3)]
+    if op == "paint":
+        for _ in range(rng.integers(1, 3)):
+            argv += ["--select", pick(SWEEP_SELECTS)]
+        if rng.random() < 0.3:
+            argv += ["--deselect", pick(SWEEP_SELECTS)]
+        if rng.random() < 0.3:
+            argv += [["--grow", "--shrink"][rng.integers(2)], pick(SWEEP_RINGS)]
+        argv += ["--wand-tolerance", pick(SWEEP_TOLERANCES)]
+        argv += ["--paint=" + pick(SWEEP_COLOURS)]
+    elif op == "stamp":
+        if rng.random() < 0.5:
+            argv += ["--select", pick(SWEEP_SELECTS)]
+        argv += ["--stamp", pick(SWEEP_STAMPS), "--size=" + pick(SWEEP_SIZES), "--rotation=" + pick(SWEEP_ROTATIONS),
+                 "--color=" + pick(SWEEP_COLOURS)]
+        if rng.random() < 0.3:
+            argv += ["--camera", pick(SWEEP_CAMERAS)]
+        else:
+            argv += ["--view", pick(SWEEP_VIEWS)]
+        if rng.random() < 0.2:
+            argv += ["--at=" + pick((["32,32", "20,40"], ["nan,3", "1e9,1e9", "5"]))]
+    else:
+        if rng.random() < 0.7:
+            argv += ["--shape=" + pick(SWEEP_SHAPES)]
+        if rng.random() < 0.5 or len(argv) == 6:
+            argv += ["--expression=" + pick(SWEEP_EXPRESSIONS)]
+    return argv
+
+
+def test_random_edit_arguments_exit_0_with_a_finite_avatar_or_2_with_one_line(avatar_file, tmp_path, capsys,
+                                                                             monkeypatch):
+    """A seeded sweep of valid and invalid gma edit arguments: every run writes a finite avatar (exit 0) or
+    prints one line and writes nothing (exit 2); never a traceback, never exit 1."""
+    from gma.avatar import Avatar
+    from gma.core.checks import non_finite_problem
+
+    monkeypatch.chdir(tmp_path)
+    _sweep_files(tmp_path)
+    rng = np.random.default_rng(65)
+    out = tmp_path / "out.gma"
+    codes = []
+    for _ in range(30):
+        argv = _sweep_argv(rng, avatar_file, out)
+        try:
+            code = main(argv)
+        except SystemExit as exc:  # argparse
+            code = exc.code
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        codes.append(code)
+        if code == 0:
+            avatar = Avatar.load(out)  # refuses non-finite tensors itself; checked here once more
+            bad = {k: p for k, v in avatar.model.state_dict().items() if (p := non_finite_problem(v))}
+            assert not bad and non_finite_problem(avatar.shape) is None, (argv, bad)
+            out.unlink()
+        else:
+            assert code == 2, (argv, code, err)
+            assert len(err) == 1 and "error:" in err[0], (argv, err)
+            assert not out.exists(), argv
+    assert 0 in codes and 2 in codes, codes  # the sweep reaches both ends
+
+
+@pytest.mark.parametrize("what", ["loss", "parameters"])
+def test_a_diverging_fit_stops_with_one_line_and_resumes(what, seq_dir, tmp_path, capsys, monkeypatch):
+    """A loss that turns NaN (at step 4), or parameters that do while the loss stays finite (found by the
+    checkpoint of step 3), stop gma fit with one line naming the step and the last good checkpoint, which
+    --resume continues from."""
+    import torch
+
+    import gma.train.trainer as trainer
+    from gma.avatar import Avatar
+
+    real_loss, real_save, calls = trainer.Trainer._loss, trainer.save_checkpoint, []
+
+    def loss_nan_at_step_4(self, *args, **kwargs):
+        loss, rec, marks = real_loss(self, *args, **kwargs)
+        calls.append("loss")
+        return (loss * float("nan") if calls.count("loss") == 4 else loss), rec, marks
+
+    def save_nan_at_second_checkpoint(path, net, opt, meta):
+        calls.append("save")
+        if calls.count("save") == 2:
+            with torch.no_grad():
+                next(net.parameters()).view(-1)[0] = float("nan")
+        real_save(path, net, opt, meta)
+
+    if what == "loss":
+        monkeypatch.setattr(trainer.Trainer, "_loss", loss_nan_at_step_4)
+    else:
+        monkeypatch.setattr(trainer, "save_checkpoint", save_nan_at_second_checkpoint)
+    out = tmp_path / "o.gma"
+    argv = ["fit", str(seq_dir), "-o", str(out), "--quiet", "--stage1-steps", "3", "--stage2-steps", "2",
+            "--checkpoint-every", "2", "--preview-every", "0"]
+    assert main(argv) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    expected = ("the loss is nan at step 4", "(step 3)") if what == "loss" else ("not finite", "(step 2)")
+    assert len(err) == 1 and "the fit diverged: " in err[0] and expected[0] in err[0], err
+    assert f"last good checkpoint {expected[1]}" in err[0], err
+    assert not out.exists() and (tmp_path / "o.fit" / "checkpoint.safetensors").is_file()
+    monkeypatch.undo()
+    assert main([*argv, "--resume"]) == 0
+    assert Avatar.load(out).info["steps"] == 5

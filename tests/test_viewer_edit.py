@@ -222,6 +222,20 @@ def test_keep_body_writes_the_shape_and_undo_brings_the_sliders_back(avatar_stat
     torch.testing.assert_close(ctl.shape, shape0)
 
 
+def test_keep_body_refuses_values_outside_the_body_range(avatar_state):
+    """The Body panel's "keep" goes through Editor.check_body: a NaN or out-of-range slider value (typed
+    into a slider's text field) is refused in one line, and the avatar keeps its shape and history."""
+    s, ed = avatar_state, avatar_state.edit
+    ctl, shape0, n = s.controls, s.source.avatar.shape.clone(), len(s.source.avatar.history)
+    for bad in (float("nan"), 7.0):
+        ctl.shape = shape0.clone()
+        ctl.shape[1] = bad
+        with pytest.raises(EditError, match=r"not a finite number in \[0, 1\]"):
+            ed.keep_body()
+    assert len(s.source.avatar.history) == n
+    torch.testing.assert_close(s.source.avatar.shape, shape0)
+
+
 def test_merge_records_keeps_the_oldest_value_of_each_face():
     from gma.edit.history import make_record, record_face_ids, record_old
     from viewer.editing import merge_records

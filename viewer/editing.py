@@ -641,7 +641,8 @@ class EditTools:
         """Write the Body panel's shape and expression into the avatar (undoable, saved with it)."""
         self.wait()
         ctl, editor = self.state.controls, self.editor
-        shape, expr = ctl.shape.clone(), ctl.expression.clone()
+        # Checked here, on this thread, so a value out of the body's range is refused at once.
+        shape, expr = editor.check_body(ctl.shape.clone(), ctl.expression.clone())
         return self._run("body", lambda: editor.set_body(shape=shape, expression=expr))
 
     # -- history --------------------------------------------------------------------------------------

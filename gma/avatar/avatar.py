@@ -10,7 +10,9 @@ File layout (one safetensors file; never pickle, so opening a stranger's avatar 
               history = JSON list of edit records, info = JSON dict (fit summary, free-form)
 
 Writes are atomic (temporary file, fsync, rename). A file from a newer format version is refused with
-a message that names the file and both versions.
+a message that names the file and both versions. Every tensor is finite both ways: a file holding a
+NaN or an infinity is refused on reading, and an avatar holding one is never written (an edit or a
+diverged fit cannot produce such a file).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ from gma.avatar.model import AvatarModel, DecodedAvatar
 from gma.body import load_body
 from gma.body.registry import BODY_MODELS
 from gma.core.atomic import atomic_write_bytes
-from gma.core.errors import InputError
+from gma.core.checks import require_finite
+from gma.core.errors import InputError, NonFiniteError
 
 __all__ = ["FORMAT_VERSION", "Avatar", "AvatarFileError"]
 
@@ -78,12 +81,17 @@ class Avatar:
         return self.model.decode(layer or self.render_layer).detach()
 
     # -- file IO ---------------------------------------------------------------------------------------
-    def to_bytes(self) -> bytes:
+    def to_bytes(self, where: str = "avatar") -> bytes:
+        """The ``.gma`` file's bytes; :class:`NonFiniteError` (naming ``where`` and the tensor) when a
+        tensor holds a NaN or an infinity, or the expression in ``info`` does."""
         tensors = {f"model.{k}": v.detach().contiguous().cpu() for k, v in self.model.state_dict().items()}
         tensors["rest_vertices"] = self.rest_vertices.contiguous()
         tensors["shape"] = self.shape.float().contiguous()
         if self.face_seen is not None:
             tensors["face_seen"] = self.face_seen.float().contiguous()
+        require_finite({_tensor_name(k): v for k, v in tensors.items()}, f"{where}: not written", NonFiniteError)
+        if "expression" in self.info:
+            require_finite({"the expression": self.info["expression"]}, f"{where}: not written", NonFiniteError)
         meta = {"format": AVATAR_FORMAT, "version": str(FORMAT_VERSION), "body": self.body_name,
                 "config": json.dumps(self.config.to_dict()), "history": json.dumps(self.history),
                 "info": json.dumps(self.info)}
@@ -92,7 +100,7 @@ class Avatar:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the avatar to ``path`` atomically; returns the path."""
         path = Path(path)
-        atomic_write_bytes(path, self.to_bytes())
+        atomic_write_bytes(path, self.to_bytes(str(path)))
         return path
 
     @staticmethod
@@ -114,6 +122,7 @@ class Avatar:
             raise AvatarFileError(f"{path}: bad avatar metadata ({exc})") from None
         if not isinstance(history, list) or not isinstance(info, dict):
             raise AvatarFileError(f"{path}: bad avatar metadata (history must be a list, info an object)")
+        _check_info_expression(info, path)
         if meta["body"] not in BODY_MODELS:
             raise AvatarFileError(f"{path}: bound to body model {meta['body']!r}, which GMA does not know "
                                   f"({', '.join(BODY_MODELS)})")
@@ -149,6 +158,21 @@ def _face_seen(path: Path, tensors: dict, num_faces: int) -> torch.Tensor | None
     if not bool(torch.isfinite(seen).all()) or float(seen.min()) < 0 or float(seen.max()) > 1:
         raise AvatarFileError(f"{path}: face_seen holds values outside [0, 1] (damaged file)")
     return seen
+
+
+def _tensor_name(key: str) -> str:
+    """The name a user knows a stored tensor by (``model.f_tex`` -> ``f_tex``)."""
+    return key[len("model."):] if key.startswith("model.") else key
+
+
+def _check_info_expression(info: dict, path: Path) -> None:
+    """The default expression a body edit stores in ``info``: a list of finite numbers (JSON lets NaN in)."""
+    if "expression" not in info:
+        return
+    expr = info["expression"]
+    if not isinstance(expr, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in expr):
+        raise AvatarFileError(f"{path}: bad avatar metadata (the expression must be a list of numbers)")
+    require_finite({"the expression in its metadata": expr}, str(path), AvatarFileError)
 
 
 def canonical_safetensors(data: bytes) -> bytes:
@@ -190,4 +214,5 @@ def read_tagged_file(path: Path, formats: dict[str, int], what: str) -> tuple[di
                               f"({formats[kind]}); update GMA to open it")
     if version < 1:
         raise AvatarFileError(f"{path}: bad format version {version}")
+    require_finite({_tensor_name(k): v for k, v in tensors.items()}, str(path), AvatarFileError)
     return tensors, meta

@@ -25,6 +25,8 @@ from gma.avatar.avatar import AVATAR_FORMAT, FORMAT_VERSION, AvatarFileError, re
 from gma.avatar.config import AvatarConfig
 from gma.avatar.model import AvatarModel
 from gma.core.atomic import atomic_write_bytes
+from gma.core.checks import require_finite
+from gma.core.errors import NonFiniteError
 
 __all__ = ["ARCHITECTURE_FIELDS", "load_decoders", "save_decoders"]
 
@@ -43,6 +45,7 @@ def save_decoders(path: str | os.PathLike, model: AvatarModel, info: dict | None
     meta = {"format": DECODERS_FORMAT, "version": str(DECODERS_VERSION), "body": model.config.body,
             "config": json.dumps(model.config.to_dict()), "info": json.dumps(info or {})}
     path = Path(path)
+    require_finite(tensors, f"{path}: not written", NonFiniteError)
     atomic_write_bytes(path, save(tensors, metadata=meta))
     return path
 

@@ -65,6 +65,24 @@ class ParamSpace:
                 f"got {tuple(value.shape)}"
             )
 
+    def check_values(self, value: torch.Tensor) -> None:
+        """Raise ValueError unless ``value`` has the right shape (:meth:`validate`), is finite and, where
+        the space declares a range, lies in ``[low, high]``; the message names the first bad entry and its
+        range. For values a user sets (an edit, the viewer's sliders); posing only checks shapes, since
+        an optimiser may step outside the range on its way."""
+        value = torch.as_tensor(value, dtype=torch.float32)
+        self.validate(value)
+        flat = value.reshape(-1, self.size, *self.entry_shape).numpy()
+        ranged = self.low is not None and self.high is not None and not self.entry_shape
+        bad = ~np.isfinite(flat)
+        if ranged:
+            bad |= (flat < self.low) | (flat > self.high)
+        if bad.any():
+            at = tuple(np.argwhere(bad)[0])
+            label = self.labels[at[1]]
+            where = f"a finite number in [{self.low[at[1]]:g}, {self.high[at[1]]:g}]" if ranged else "a finite number"
+            raise ValueError(f"{self.name} entry {label!r} is {flat[at]:g}, not {where}")
+
 
 @dataclass
 class BodyPose:

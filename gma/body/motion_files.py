@@ -10,6 +10,7 @@ in Anny's rest pose (feet on the floor, never below it).
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -140,7 +141,8 @@ def parse_bvh(path: str | Path) -> Bvh:
         raise InputError(f"{path}: not a BVH file I can read ({type(exc).__name__}: {exc})") from None
     need(not stack, "unbalanced braces")
     need(0 < frames <= MAX_MOTION_FRAMES, f"{frames} frames")
-    need(frame_time > 0, f"frame time {frame_time}")
+    need(math.isfinite(frame_time) and frame_time > 0, f"frame time {frame_time}")
+    need(np.isfinite(np.asarray(offsets, np.float64)).all(), "a non-finite OFFSET")
     width = sum(len(c) for c in channels)
     need(values.size == frames * width, f"{values.size} motion values for {frames} frames of {width} channels")
     need(np.isfinite(values).all(), "non-finite motion values")
@@ -196,8 +198,8 @@ def _amass_motion(path: Path, data: dict, body, up: str | None) -> tuple[np.ndar
         raise InputError(f"{path}: non-finite values in 'poses' or 'trans'")
     fps_key = next((k for k in ("mocap_framerate", "mocap_frame_rate", "fps") if k in data), None)
     fps = float(data[fps_key]) if fps_key else 30.0
-    if not fps > 0:
-        raise InputError(f"{path}: frame rate {fps} is not positive")
+    if not (math.isfinite(fps) and fps > 0):
+        raise InputError(f"{path}: frame rate {fps} is not a finite positive number")
     # Joint names of each layout: SMPL-X keeps jaw and eyes (22-24); SMPL+H goes straight to the hands.
     joints = {66: SMPLX_JOINTS[:22], 72: SMPLX_JOINTS[:22] + ("left_hand", "right_hand"),
               156: SMPLX_JOINTS[:22] + SMPLX_JOINTS[25:], 165: SMPLX_JOINTS}[poses.shape[1]]

@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if fit.decoders:  # workers may run elsewhere: they get the absolute path
         if not Path(fit.decoders).is_file():
             raise MissingFileError(f"{fit.decoders}: decoders file not found")
+        from gma.avatar.decoders import load_decoders
+
+        load_decoders(fit.decoders, fit.avatar)  # a damaged or mismatched file: one line here, not one per person
         fit = FitConfig.from_dict({**fit.to_dict(), "decoders": str(Path(fit.decoders).resolve())})
     people = find_people(args.inputs)
     import_ray()  # its one-line error comes before torch and the body model load

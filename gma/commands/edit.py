@@ -151,7 +151,7 @@ def _stamp(ed, sel, args):
             raise EditError(f"camera {args.camera} sees no face of the avatar")
     else:
         view = ed.named_view(args.view, args.view_size, args.view_size)
-    size, unit = StampPlacement.parse_size(args.size)
+    size, unit = StampPlacement.parse_size(args.size, "--size")
     centre = None
     if args.at:
         centre = _floats(args.at, "--at")
@@ -159,6 +159,22 @@ def _stamp(ed, sel, args):
             raise EditError(f"--at must be X,Y, got {args.at!r}")
     placement = StampPlacement(centre, size, unit, args.rotation)
     return ed.stamp(image, view, placement, sel, name=Path(args.stamp).name)
+
+
+def _check_numbers(args) -> None:
+    """The numeric options against the ranges of :mod:`gma.edit.limits`, before any file is read (each
+    error names the option and its range). --shape / --expression need the body's ranges: see run."""
+    from gma.edit import StampPlacement
+    from gma.edit.limits import MAX_COLOR_TOLERANCE, MAX_RINGS, MAX_ROTATION_DEG, VIEW_SIZE, check_number, check_pixel
+
+    check_number("--wand-tolerance", args.wand_tolerance, 0.0, MAX_COLOR_TOLERANCE)
+    check_number("--view-size", args.view_size, *VIEW_SIZE, "px")
+    check_number("--grow", args.grow, 0, MAX_RINGS, "rings")
+    check_number("--shrink", args.shrink, 0, MAX_RINGS, "rings")
+    check_number("--rotation", args.rotation, -MAX_ROTATION_DEG, MAX_ROTATION_DEG, "degrees")
+    StampPlacement.parse_size(args.size, "--size")
+    if args.at:
+        check_pixel("--at", _floats(args.at, "--at"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -184,6 +200,9 @@ def run(args: argparse.Namespace) -> int:
     if args.mirror and (args.paint is None and args.transfer is None):
         raise EditError("--mirror applies to --paint and --transfer (a stamp is placed from one view: stamp "
                         "each side from its own view)")
+    _check_numbers(args)
+    shape = None if args.shape is None else _floats(args.shape, "--shape")
+    expression = None if args.expression is None else _floats(args.expression, "--expression")
     avatar = Avatar.load(src)
     if args.history:
         if not avatar.history:
@@ -193,6 +212,7 @@ def run(args: argparse.Namespace) -> int:
         if not edits:
             return 0
     ed = Editor(avatar)
+    ed.check_body(shape, expression)  # before any solve: a bad value must not cost a paint first
     if args.undo is not None:
         if not 0 < args.undo <= len(avatar.history):
             raise EditError(f"--undo {args.undo}: the history of {src} holds {len(avatar.history)} records")
@@ -214,9 +234,8 @@ def run(args: argparse.Namespace) -> int:
         donor = Avatar.load(args.transfer)
         ch = ed.transfer(donor, sel, args.what, donor_name=str(args.transfer), target_name=str(src))
         print(f"transferred {args.what} of {len(ch.faces)} faces from {args.transfer} ({ch.info['mode']})")
-    if args.shape is not None or args.expression is not None:
-        ed.set_body(None if args.shape is None else _floats(args.shape, "--shape"),
-                    None if args.expression is None else _floats(args.expression, "--expression"))
+    if shape is not None or expression is not None:
+        ed.set_body(shape, expression)
     out = avatar.save(args.out)
     print(f"wrote {out} ({len(avatar.history)} history records)")
     return 0

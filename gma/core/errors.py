@@ -11,7 +11,8 @@ so that library callers that catch those keep working.
 
 from __future__ import annotations
 
-__all__ = ["DeviceError", "GmaError", "InputError", "MissingFileError", "OutputError", "OutputExistsError"]
+__all__ = ["DeviceError", "GmaError", "InputError", "MissingFileError", "NonFiniteError", "OutputError",
+           "OutputExistsError"]
 
 
 class GmaError(Exception):
@@ -32,6 +33,11 @@ class OutputError(GmaError, OSError):
 
 class OutputExistsError(OutputError, FileExistsError):
     """An output that exists, where replacing it was not asked for."""
+
+
+class NonFiniteError(GmaError, ValueError):
+    """NaN or infinite values where a result must be finite: an avatar or checkpoint about to be saved, a
+    fit whose loss diverged. Nothing is written."""
 
 
 class DeviceError(GmaError, RuntimeError):

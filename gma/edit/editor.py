@@ -22,6 +22,7 @@ import torch
 from gma.edit.errors import EditError
 from gma.edit.history import apply_values, make_record, record_face_ids, restore_record
 from gma.edit.invert import InvertConfig
+from gma.edit.limits import MAX_COLOR_TOLERANCE, MAX_SCREEN_PIXELS, MAX_TEX_TOLERANCE, check_number, check_pixel
 from gma.edit.paint import paint_features, parse_color
 from gma.edit.screen import ScreenView
 from gma.edit.selection import FaceGraph, Selection, mirror_map
@@ -30,6 +31,8 @@ from gma.edit.transfer import WHAT, check_shared_decoders, transfer_features
 from gma.edit.views import named_view, posed_vertices
 
 __all__ = ["Change", "Editor"]
+
+WAND_TOLERANCE = {"color": MAX_COLOR_TOLERANCE, "tex": MAX_TEX_TOLERANCE}  # the largest tolerance by mode
 
 
 @dataclass
@@ -131,6 +134,9 @@ class Editor:
     def wand(self, view: ScreenView, x: float, y: float, tolerance: float = 0.1, by: str = "color") -> Selection:
         """Magic wand from the face shown at pixel (x, y) of ``view``: by "color" (mean decoded colour,
         Euclidean RGB distance) or "tex" (f_tex, distance relative to the median feature norm)."""
+        x, y = check_pixel("wand pixel", (x, y))
+        if by in WAND_TOLERANCE:
+            check_number(f"wand tolerance (by {by})", tolerance, 0.0, WAND_TOLERANCE[by])
         seed = view.face_at(x, y)
         if seed < 0:
             raise EditError(f"the wand pixel ({x:g}, {y:g}) shows no face of the avatar")
@@ -174,6 +180,9 @@ class Editor:
         # Only faces near the image's footprint can be hit: placing and projecting every surfel of the
         # body would cost more than the solve.
         cx, cy, size_px = resolve_placement(view, placement, cand)
+        if size_px > MAX_SCREEN_PIXELS:  # a size in metres, seen from very close
+            raise EditError(f"the stamp would be {size_px:.0f} px wide in this view (at most {MAX_SCREEN_PIXELS:.0f}): "
+                            "give a smaller size or a camera further away")
         ih, iw = image.shape[:2]
         reach = 0.5 * size_px * math.hypot(ih, iw) / max(ih, iw) + 4.0  # half-diagonal + a surfel's spread
         near = torch.from_numpy(np.hypot(view.px[cand.numpy(), 0] - cx, view.px[cand.numpy(), 1] - cy) <= reach)
@@ -218,25 +227,36 @@ class Editor:
         params = {"donor": donor_name, "what": what, "mode": info["mode"]}
         return self._commit("transfer", params, sel.faces, new, info=info)
 
+    def check_body(self, shape=None, expression=None) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+        """``shape`` [S] and ``expression`` [E] (either may be None) as float tensors, after checking
+        them against the body's parameter spaces: the right size, finite, in range. EditError names the
+        bad entry and its range (Anny: every phenotype and facial-action value in [0, 1])."""
+        out = []
+        for name, value in (("shape", shape), ("expression", expression)):
+            if value is None:
+                out.append(None)
+                continue
+            try:
+                t = torch.as_tensor(np.asarray(value, np.float32))
+                if t.dim() != 1:
+                    raise ValueError(f"{name} must be a list of {self.body.param_spaces[name].size} numbers")
+                self.body.param_spaces[name].check_values(t)
+            except (ValueError, TypeError) as exc:
+                raise EditError(f"bad body {name}: {exc}") from None
+            out.append(t)
+        return out[0], out[1]
+
     def set_body(self, shape=None, expression=None) -> Change:
         """Set the avatar's body shape [S] and / or default expression [E] (saved with it; the PE and
-        mesh-layer directions stay those of the fitted identity, so the decoders see what they learnt)."""
+        mesh-layer directions stay those of the fitted identity, so the decoders see what they learnt).
+        Values are checked first (:meth:`check_body`)."""
         values, info, params = {}, {}, {}
         old_info = {}
-        if shape is not None:
-            s = torch.as_tensor(np.asarray(shape, np.float32))
-            try:
-                self.body.param_spaces["shape"].validate(s)
-            except ValueError as exc:
-                raise EditError(f"bad body shape: {exc}") from None
+        s, e = self.check_body(shape, expression)
+        if s is not None:
             values["shape"] = s
             params["shape"] = [float(v) for v in s]
-        if expression is not None:
-            e = torch.as_tensor(np.asarray(expression, np.float32))
-            try:
-                self.body.param_spaces["expression"].validate(e)
-            except ValueError as exc:
-                raise EditError(f"bad expression: {exc}") from None
+        if e is not None:
             info["expression"] = [float(v) for v in e]
             old_info["expression"] = self.avatar.info.get("expression")
             params["expression"] = info["expression"]

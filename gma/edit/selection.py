@@ -16,6 +16,7 @@ File format (``save``), written atomically::
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,11 +24,20 @@ import numpy as np
 import torch
 
 from gma.edit.errors import EditError
+from gma.edit.limits import MAX_RINGS, MAX_SCREEN_PIXELS, check_number, check_pixel
 from gma.edit.screen import ScreenView, points_in_polygon
 
 __all__ = ["FaceGraph", "Selection", "SelectionFile", "load_selection", "mirror_map", "save_selection"]
 
 FORMAT = "gma-selection"
+
+
+def _check_rings(what: str, rings) -> int:
+    """A ring count for grow / shrink: a whole number in [0, MAX_RINGS]."""
+    n = check_number(f"{what} rings", rings, 0, MAX_RINGS)
+    if n != int(n):
+        raise EditError(f"{what} rings: must be a whole number, got {n:g}")
+    return int(n)
 
 
 class FaceGraph:
@@ -132,6 +142,9 @@ class Selection:
     @staticmethod
     def box(view: ScreenView, box) -> Selection:
         """Visible faces whose centre is inside the pixel box ``(x0, y0, x1, y1)`` (any corner order)."""
+        box = check_pixel("box", box)
+        if len(box) != 4:
+            raise EditError(f"box: expected 4 numbers (x0, y0, x1, y1), got {len(box)}")
         x0, x1 = sorted((box[0], box[2]))
         y0, y1 = sorted((box[1], box[3]))
         px = view.px
@@ -150,10 +163,10 @@ class Selection:
     def brush(view: ScreenView, centre, radius: float, falloff: float = 0.5) -> Selection:
         """Visible faces within ``radius`` pixels of ``centre`` (x, y); weight 1 inside the inner
         ``(1 - falloff)·radius``, then a smoothstep down to 0 at ``radius`` (soft edge)."""
-        if radius <= 0:
-            raise EditError(f"brush radius must be positive, got {radius}")
-        d = np.linalg.norm(view.px - np.asarray(centre, np.float64), axis=1)
-        inner = radius * (1.0 - float(np.clip(falloff, 0, 1)))
+        radius = check_number("brush radius", radius, 0.0, MAX_SCREEN_PIXELS, "px", low_open=True)
+        falloff = check_number("brush falloff", falloff, 0.0, 1.0)
+        d = np.linalg.norm(view.px - np.asarray(check_pixel("brush centre", centre), np.float64), axis=1)
+        inner = radius * (1.0 - falloff)
         t = np.clip((radius - d) / max(radius - inner, 1e-9), 0, 1)
         w = np.where(np.isfinite(d), t * t * (3 - 2 * t), 0.0)  # smoothstep
         return Selection.from_mask(view.visible & (w > 0), w)
@@ -165,6 +178,7 @@ class Selection:
         Compared with the seed, not neighbour to neighbour, so a slow gradient does not leak everywhere."""
         from scipy.sparse.csgraph import connected_components
 
+        tolerance = check_number("wand tolerance", tolerance, 0.0, math.inf)
         vals = np.asarray(values, np.float64)
         if not 0 <= seed < len(vals):
             raise EditError(f"wand seed face {seed} is not on the body (0..{len(vals) - 1})")
@@ -233,7 +247,7 @@ class Selection:
     def grow(self, graph: FaceGraph, rings: int = 1) -> Selection:
         """Add ``rings`` rings of edge-adjacent faces (weight of a new face: 1)."""
         m = self.mask().numpy()
-        for _ in range(max(rings, 0)):
+        for _ in range(_check_rings("grow", rings)):
             m = graph.ring(m)
         w = self.dense_weights().numpy().copy()
         w[m & (w == 0)] = 1.0
@@ -242,7 +256,7 @@ class Selection:
     def shrink(self, graph: FaceGraph, rings: int = 1) -> Selection:
         """Drop the faces within ``rings`` rings of an unselected face."""
         out = ~self.mask().numpy()
-        for _ in range(max(rings, 0)):
+        for _ in range(_check_rings("shrink", rings)):
             out = graph.ring(out)
         return Selection.from_mask(~out, self.dense_weights())
 

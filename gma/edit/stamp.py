@@ -17,6 +17,7 @@ import numpy as np
 import torch
 
 from gma.edit.errors import EditError
+from gma.edit.limits import MAX_ROTATION_DEG, MAX_SCREEN_PIXELS, MAX_STAMP_METRES, check_number, check_pixel
 from gma.edit.screen import ScreenView
 
 __all__ = ["SHAPES", "StampPlacement", "load_stamp_image", "resolve_placement", "solid_shape", "stamp_targets"]
@@ -39,12 +40,16 @@ class StampPlacement:
     def __post_init__(self):
         if self.unit not in ("m", "px"):
             raise EditError(f"stamp size unit must be 'm' or 'px', got {self.unit!r}")
-        if not (self.size > 0 and math.isfinite(self.size)):
-            raise EditError(f"stamp size must be positive, got {self.size}")
+        self.size = check_stamp_size("stamp size", self.size, self.unit)
+        self.rotation = check_number("stamp rotation", self.rotation, -MAX_ROTATION_DEG, MAX_ROTATION_DEG,
+                                     "degrees")
+        if self.centre is not None:
+            self.centre = check_pixel("stamp centre", self.centre)
 
     @staticmethod
-    def parse_size(text: str) -> tuple[float, str]:
-        """``0.15m``, ``15cm`` or ``120px`` -> (size, unit)."""
+    def parse_size(text: str, name: str = "stamp size") -> tuple[float, str]:
+        """``0.15m``, ``15cm`` or ``120px`` -> (size, unit), checked against the unit's range; errors
+        name ``name`` (the option the text came from)."""
         s = text.strip().lower()
         for suffix, unit, mult in (("cm", "m", 0.01), ("mm", "m", 0.001), ("px", "px", 1.0), ("m", "m", 1.0)):
             if s.endswith(suffix):
@@ -52,10 +57,15 @@ class StampPlacement:
                     value = float(s[: -len(suffix)]) * mult
                 except ValueError:
                     break
-                if value > 0:
-                    return value, unit
-                break
-        raise EditError(f"cannot parse stamp size {text!r}: use e.g. 0.15m, 15cm or 120px")
+                return check_stamp_size(f"{name} {text}", value, unit), unit
+        raise EditError(f"cannot parse {name} {text!r}: use e.g. 0.15m, 15cm or 120px")
+
+
+def check_stamp_size(name: str, size: float, unit: str) -> float:
+    """``size`` in ``unit`` ("m" or "px") when it is finite, positive and at most MAX_STAMP_METRES /
+    MAX_SCREEN_PIXELS, else EditError naming ``name`` and the range."""
+    high = MAX_STAMP_METRES if unit == "m" else MAX_SCREEN_PIXELS
+    return check_number(name, size, 0.0, high, unit, low_open=True)
 
 
 def load_stamp_image(path) -> np.ndarray:

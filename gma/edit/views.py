@@ -15,6 +15,7 @@ import torch
 
 from gma.core.camera import Camera
 from gma.edit.errors import EditError
+from gma.edit.limits import VIEW_SIZE, check_number
 
 __all__ = ["NAMED_VIEWS", "canonical_vertices", "named_view", "posed_vertices"]
 
@@ -46,6 +47,8 @@ def named_view(name: str, vertices, up_axis: str = "z", width: int = 512, height
     framing the whole body with a 10 % margin."""
     if name not in NAMED_VIEWS:
         raise EditError(f"unknown view {name!r}; known: {', '.join(NAMED_VIEWS)}")
+    for side in (width, height):
+        check_number("view size", side, *VIEW_SIZE, "px")
     v = np.asarray(vertices, np.float64)
     lo, hi = v.min(0), v.max(0)
     up, front = _UP[up_axis], _FRONT[up_axis]

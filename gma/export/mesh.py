@@ -16,6 +16,8 @@ from PIL import Image
 
 from gma.avatar.model import DecodedAvatar
 from gma.core.atomic import atomic_write_bytes
+from gma.core.checks import require_finite
+from gma.core.errors import NonFiniteError
 from gma.synth.uv_bake import dilate, rasterize_uv
 
 __all__ = ["MESH_SUFFIXES", "posed_mesh", "surfel_vertex_colors", "write_mesh"]
@@ -72,6 +74,7 @@ def write_mesh(path: str | Path, mesh: trimesh.Trimesh) -> Path:
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise ValueError(f"{path}: mesh formats are {', '.join(MESH_SUFFIXES)}")
+    require_finite({"the mesh vertices": mesh.vertices}, f"{path}: not written", NonFiniteError)
     if suffix == ".obj":
         files = trimesh.exchange.obj.export_obj(mesh, include_texture=True, return_texture=True,
                                                 mtl_name=f"{path.stem}.mtl", write_texture=False)

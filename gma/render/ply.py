@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from gma.core.atomic import atomic_write_bytes
-from gma.core.errors import InputError
+from gma.core.checks import require_finite
+from gma.core.errors import InputError, NonFiniteError
 from gma.render.scenes import quat_multiply
 
 SH_C0 = 0.28209479177387814  # degree-0 spherical harmonic constant
@@ -127,6 +128,9 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
             arr = np.frombuffer(raw, dtype=dtype, count=count)
             columns = {n: arr[n] for n in names}
 
+    used = [*REQUIRED, "scale_2", "f_dc_0", "f_dc_1", "f_dc_2", "red", "green", "blue"]
+    require_finite({f"property {k!r}": columns[k] for k in used if k in columns}, str(path))
+
     def col(*keys):
         return np.stack([np.asarray(columns[k], np.float64) for k in keys], 1)
 
@@ -146,12 +150,13 @@ def load_splat_ply(path: str | Path) -> dict[str, np.ndarray]:
         colors = col("red", "green", "blue") / 255.0
     else:
         colors = np.full((count, 3), 0.7)
-    opacities = 1.0 / (1.0 + np.exp(-np.asarray(columns["opacity"], np.float64)))
-    out = {"means": means, "quats": quats, "scales": np.exp(log_scales), "opacities": opacities, "colors": colors}
-    out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
-    bad = [k for k, v in out.items() if not np.isfinite(v).all()]
-    if bad:
-        raise InputError(f"{path}: non-finite values in {bad}")
+    # Finite properties can still overflow once activated (a log scale of 1000): checked below, in one
+    # line, instead of numpy's overflow warnings.
+    with np.errstate(over="ignore"):
+        opacities = 1.0 / (1.0 + np.exp(-np.asarray(columns["opacity"], np.float64)))
+        out = {"means": means, "quats": quats, "scales": np.exp(log_scales), "opacities": opacities, "colors": colors}
+        out = {k: np.ascontiguousarray(v, np.float32) for k, v in out.items()}
+    require_finite({f"{k} (activated)": v for k, v in out.items()}, f"{path}: values too large", InputError)
     return out
 
 
@@ -190,6 +195,7 @@ def save_splat_ply(path: str | Path, means, quats, scales, opacities, colors, th
         np.asarray(means, np.float64), _quat_normals(quats), (np.asarray(colors, np.float64)[:, :3] - 0.5) / SH_C0,
         np.zeros((n, rest)), np.log(o / (1 - o))[:, None], np.log(np.maximum(scales, 1e-12)),
         np.asarray(quats, np.float64)], 1).astype("<f4")
+    require_finite({"the splat data": data}, f"{path}: not written", NonFiniteError)
     prop_lines = "".join(f"property float {p}\n" for p in props)
     header = f"ply\nformat binary_little_endian 1.0\nelement vertex {n}\n{prop_lines}end_header\n"
     atomic_write_bytes(path, header.encode("ascii") + data.tobytes())

@@ -11,6 +11,8 @@ from safetensors import safe_open
 from safetensors.torch import load_file, save
 
 from gma.core.atomic import atomic_write_bytes
+from gma.core.checks import require_finite
+from gma.core.errors import NonFiniteError
 
 __all__ = ["load_checkpoint", "save_checkpoint"]
 
@@ -31,7 +33,9 @@ def _unique_state(model: torch.nn.Module) -> tuple[dict[str, torch.Tensor], dict
 
 
 def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.Optimizer, meta: dict) -> None:
-    """Write model parameters, the optimiser's per-parameter state and ``meta`` (JSON-able) atomically."""
+    """Write model parameters, the optimiser's per-parameter state and ``meta`` (JSON-able) atomically.
+    A NaN or infinity anywhere raises :class:`NonFiniteError` and leaves the previous checkpoint (the last
+    good one) in place."""
     tensors = {f"model.{k}": v.detach().contiguous() for k, v in _unique_state(model)[0].items()}
     state = optimizer.state_dict()
     for pid, st in state["state"].items():
@@ -40,6 +44,7 @@ def save_checkpoint(path: Path, model: torch.nn.Module, optimizer: torch.optim.O
             tensors[f"opt.{pid}.{name}"] = t.detach().contiguous()
     meta = {**meta, "param_groups": [{k: v for k, v in g.items() if k != "params"} | {"params": g["params"]}
                                      for g in state["param_groups"]]}
+    require_finite(tensors, f"{path}: not written", NonFiniteError)
     atomic_write_bytes(path, save(tensors, metadata={"meta": json.dumps(meta)}))
 
 
@@ -53,6 +58,7 @@ def load_checkpoint(path: Path, model: torch.nn.Module, optimizer_factory) -> tu
             meta = json.loads(f.metadata()["meta"])
     except Exception as exc:  # a damaged checkpoint must say which file
         raise ValueError(f"{path}: unreadable checkpoint ({exc}); delete it to start over") from exc
+    require_finite(tensors, f"{path}: damaged checkpoint (delete it to start over)", ValueError)
     state = {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}
     for alias, stored in _unique_state(model)[1].items():
         if stored in state:

@@ -4,6 +4,7 @@ and the quick / full presets."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import asdict, dataclass, fields
 
 from gma.avatar.config import AvatarConfig, doc
@@ -14,6 +15,16 @@ TRAINING_MODES = ("two_stage", "one_stage")
 REFINE_MODES = ("auto", "on", "off")
 # Which bones pose refinement corrects (gma.train.pose_refine.BONE_SETS holds the names).
 BONE_SET_NAMES = ("body", "video")
+
+
+def _float_options(config, prefix: str = ""):
+    """(command-line option, value) of every float field of ``config``, nested dataclasses included."""
+    for f in fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _float_options(value, f"{prefix}{f.name}.")
+        elif isinstance(value, float):
+            yield f"--{prefix}{f.name}".replace("_", "-"), value
 
 
 @dataclass
@@ -121,6 +132,10 @@ class FitConfig:
             raise ValueError(f"symmetry must be >= 0, got {self.symmetry}")
         if self.stage1_steps < 0 or self.stage2_steps < 0 or self.resolution < 8:
             raise ValueError("steps must be >= 0 and resolution >= 8")
+        for option, value in _float_options(self):
+            # Rates, weights, sizes and fractions, all >= 0: a NaN would only show as a diverged fit.
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{option}: must be a finite number >= 0, got {value}")
 
     @property
     def total_steps(self) -> int:

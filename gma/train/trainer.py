@@ -15,6 +15,7 @@ Sequences with estimated poses (from ``gma import video``) also learn per-frame 
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,6 +27,7 @@ from gma.avatar.avatar import Avatar
 from gma.avatar.decoders import load_decoders, save_decoders
 from gma.body import load_body
 from gma.core.atomic import atomic_write_json
+from gma.core.errors import NonFiniteError
 from gma.render.image_io import save_png
 from gma.train.checkpoint import load_checkpoint, save_checkpoint
 from gma.train.config import FitConfig, LossWeights
@@ -319,6 +321,15 @@ class Trainer:
             rec["subject"] = subject
         return loss, rec, marks
 
+    def _diverged_message(self, what: str, step: int, stage: Stage, ckpt: Path, saved_step: int | None) -> str:
+        """One line for a fit that diverged (``what``: the loss or the parameters turned NaN or infinite at
+        ``step``, counted from 1): where, and what is kept to resume from. The parameters of that step are
+        not saved; the checkpoint on disk is from before, and a save never writes non-finite values, so it
+        is a good one."""
+        kept = (f"the last good checkpoint (step {saved_step}) is kept in {ckpt} for --resume"
+                if saved_step is not None else "no checkpoint was written yet")
+        return f"{self.out}: the fit diverged: {what} at step {step} ({stage.name}); {kept}"
+
     def _aligns_poses(self) -> bool:
         """Whether the fit runs the pose alignment pass: poses refined, ``--pose.align`` > 0, and a stage 1
         to end (the one-stage ablation has none)."""
@@ -392,6 +403,7 @@ class Trainer:
         cfg_json = self.cfg.to_dict()
         total = sum(s.steps for s in self.stages)
         step, elapsed = 0, 0.0
+        saved_step = None  # the step of the last checkpoint on disk (None: none yet)
         opt = None
         if resume and ckpt.is_file():
             saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
@@ -410,6 +422,7 @@ class Trainer:
                                  "resume with the same options, or fit without --resume to start over")
             opt, meta = load_checkpoint(ckpt, self.net, lambda m: self._optimizer(self.stages[m["stage"]]))
             step, elapsed, self.history = meta["step"], meta["elapsed"], meta["history"]
+            saved_step = step
             self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
             self.align_seconds = meta.get("align_seconds", 0.0)
             if self.progress:
@@ -433,6 +446,11 @@ class Trainer:
             for g in opt.param_groups:
                 g["lr"] = g["base_lr"] * self.cfg.lr_decay**frac
             loss, rec, marks = self._loss(stage, self._frame(step), self.timing, learn_poses=step >= self.pose_start)
+            loss_value = float(loss.detach())
+            if not math.isfinite(loss_value):
+                bar.close()
+                raise NonFiniteError(self._diverged_message(f"the loss is {loss_value}", step + 1, stage, ckpt,
+                                                            saved_step))
             tb = time.perf_counter()
             loss.backward()
             tc = time.perf_counter()
@@ -446,8 +464,8 @@ class Trainer:
             self.timed_steps += 1
             step += 1
             if step % self.cfg.log_every == 0 or step == total:
-                self.history.append({"step": step, "stage": stage.name, "loss": float(loss.detach()), **rec})
-            bar.set_postfix(stage=stage.name[-1], loss=f"{float(loss.detach()):.4f}", psnr=f"{rec['psnr']:.1f}")
+                self.history.append({"step": step, "stage": stage.name, "loss": loss_value, **rec})
+            bar.set_postfix(stage=stage.name[-1], loss=f"{loss_value:.4f}", psnr=f"{rec['psnr']:.1f}")
             bar.update(1)
             stage_end = local + 1 == stage.steps
             if stage_end and si == 0 and self._aligns_poses():
@@ -459,7 +477,13 @@ class Trainer:
                 if meta["stage"] != si:  # the next stage starts with a fresh optimiser
                     opt = self._optimizer(self.stages[meta["stage"]])
                     stage_idx = meta["stage"]
-                save_checkpoint(ckpt, self.net, opt, meta)
+                try:
+                    save_checkpoint(ckpt, self.net, opt, meta)
+                except NonFiniteError as exc:  # a finite loss, but this step's update was not
+                    bar.close()
+                    raise NonFiniteError(self._diverged_message(f"the parameters are not finite ({exc})", step,
+                                                                stage, ckpt, saved_step)) from None
+                saved_step = step
             if self.cfg.preview_every and step % self.cfg.preview_every == 0:
                 self._preview(step)
         bar.close()
