@@ -32,7 +32,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, load_standard_workload, machine, scene_tensors  # noqa: E402
+from common import load_standard_workload, machine, scene_tensors  # noqa: E402
 
 from gma.core.args import positive_float, positive_int  # noqa: E402
 from gma.gpu import get_context  # noqa: E402
@@ -77,9 +77,6 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=positive_int, default=6, help="bursts per kind of pause")
     args = ap.parse_args(argv)
     workload = load_standard_workload()
-    if workload is None:
-        print(f"standard workload not found ({SHARED_WORKLOAD}): nothing to time")
-        return 0
     ctx = get_context()
     scene = scene_tensors(workload, args.count)
     size = (workload.WIDTH, workload.HEIGHT)
