@@ -18,7 +18,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 BENCH = REPO / "benchmarks"
-HELPERS = {"common.py", "fit_helpers.py"}  # modules the scripts import, not scripts
+HELPERS = {"common.py", "fit_helpers.py", "splat_scene.py", "peer_gsplat.py"}  # modules the scripts import
 
 # script -> arguments that make it small; {tmp} is a fresh folder for its outputs, {repo} this checkout.
 # A string: skip, with why.
@@ -52,10 +52,12 @@ SMOKE: dict[str, list[str] | str] = {
     "video_masks.py": ["--work", "{tmp}/work"],
     "video_hdr.py": ["--work", "{tmp}/work", "--figure", "{tmp}/hdr.png"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
+    "report.py": "runs the other scripts; test_report_names_machine_commit_and_command runs it small",
 }
-# Scripts that read data kept beside the repository (../shared), not in it: skipped, with why, in a
-# checkout that lacks it (CI's clone sits beside it).
-NEEDS = {"video_hdr.py": REPO.parent / "shared" / "data" / "iper_turn_512.gif"}
+# Scripts that read the iPER clip, which the repository does not ship (research use only; docs/data.md):
+# skipped, with why, where it is absent. The lookup is benchmarks/common.py's iper_clip().
+IPER_CLIP = Path(os.environ.get("GMA_IPER_CLIP") or REPO / "data" / "iper_turn_512.gif")
+NEEDS = {"video_hdr.py": IPER_CLIP, "video_masks.py": IPER_CLIP}
 
 
 def test_every_script_has_a_smoke_row():
@@ -176,3 +178,29 @@ def test_first_call_refuses_a_pause_that_is_not_positive():
                              env=dict(os.environ, PYTHONPATH=str(REPO)))
         assert bad.returncode == 2 and "Traceback" not in bad.stderr, bad.stderr
         assert "--pause" in bad.stderr.strip().splitlines()[-1] and bad.stdout == ""
+
+
+@pytest.mark.gpu
+def test_report_names_machine_commit_and_command(tmp_path):
+    """``report.py --quick`` writes its results file where ``--out`` says: machine, adapter, commit, date and
+    the command that made it, a row of figures from the script it ran, and no row for the ones left out."""
+    out = tmp_path / "RESULTS.md"
+    args = ["--quick", "--only", "render", "--out", str(out)]
+    run = subprocess.run([sys.executable, str(BENCH / "report.py"), *args], cwd=REPO, capture_output=True,
+                         text=True, timeout=600, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode == 0, run.stderr[-3000:]
+    text = out.read_text()
+    for line in ("- machine: ", "- adapter: ", "- commit: ", "- date: ", f"- command: `python benchmarks/report.py "
+                                                                         f"{' '.join(args)}`"):
+        assert line in text, line
+    assert f"{os.cpu_count()} cores" in text and "Quick mode" in text
+    assert "| forward frame, standard 0.5k surfels at 512x512 | " in text and "peer ratio" not in text
+
+
+@pytest.mark.parametrize("args, message", [(["--only", "nothing"], "--only nothing: no such benchmark"),
+                                           (["--out", "/no/such/folder/R.md"], "its folder does not exist")])
+def test_report_refuses_bad_arguments_before_running_anything(tmp_path, args, message):
+    run = subprocess.run([sys.executable, str(BENCH / "report.py"), "--quick", *args], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert run.returncode == 2 and "Traceback" not in run.stderr and run.stdout == "", run.stderr
+    assert message in run.stderr.strip().splitlines()[-1]
