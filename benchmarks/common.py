@@ -47,7 +47,7 @@ def median_dict(dicts: list[dict[str, float]]) -> dict[str, float]:
 
 
 def machine() -> str:
-    """The processor, its cores, the vector width torch's kernels use and the load: torch's peers get ~1.4x
+    """The processor, its cores, the vector width torch's kernels use and the load: torch's peers run
     faster on an AVX-512 processor where lavapipe stays at 256 bits, so ratios differ by machine kind."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     return f"{cpu_name()}, {os.cpu_count()} cores{_torch_simd()}, load {load:.2f}"
@@ -151,7 +151,7 @@ class CheckoutWorker:
     """A GMA checkout's code in a worker process: ``script --worker *args`` run with PYTHONPATH=the
     checkout, which prints "ready" once set up and then answers each request line with one line. Lets a
     benchmark time another checkout (``--baseline``) beside this one, turns interleaved, in one run;
-    ``env`` adds variables for the worker (e.g. ``GMA_LAVAPIPE=system``: the same code on another driver)."""
+    ``env`` adds variables for the worker (e.g. ``GMA_SHADER_DIR=/tmp/b``: the same code with other shaders)."""
 
     def __init__(self, root: str | Path, script: str | Path, *args: str, env: dict[str, str] | None = None):
         self.root = self.checkout(root)

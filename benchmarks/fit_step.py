@@ -138,7 +138,7 @@ def main() -> int:
     ap.add_argument("--baseline", type=Path, help="another GMA checkout to time beside this one")
     ap.add_argument("--baseline-env", action="append", metavar="KEY=VALUE",
                     help="KEY=VALUE for the baseline's worker only (repeatable); with --baseline . the "
-                         "same code on, e.g., the system's lavapipe: GMA_LAVAPIPE=system")
+                         "same code with, e.g., other shaders: GMA_SHADER_DIR=/tmp/b")
     ap.add_argument("--repeats", type=int, default=1 if SMOKE else 5, help="turns per side and step kind")
     ap.add_argument("--steps", type=int, default=1 if SMOKE else 8, help="steps per turn")
     ap.add_argument("--avatar", type=Path, help="a fitted avatar (with --sequence)")

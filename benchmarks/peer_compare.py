@@ -139,7 +139,7 @@ def main() -> int:
     ap.add_argument("--baseline", help="another GMA checkout to time beside this one (a worker process)")
     ap.add_argument("--baseline-env", action="append", metavar="KEY=VALUE",
                     help="KEY=VALUE for the baseline's worker only (repeatable); with --baseline . the "
-                         "same code on, e.g., the system's lavapipe: GMA_LAVAPIPE=system")
+                         "same code with, e.g., other shaders: GMA_SHADER_DIR=/tmp/b")
     ap.add_argument("--json", help="also write the results here")
     args = ap.parse_args()
     if args.burst < 2 or args.repeats < 1:

@@ -3,8 +3,7 @@ the runs that produce the figures. Figures printed here mean nothing; the script
 
 A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one). The scripts run two at
 a time (SMOKE_JOBS), started when the first of these tests asks: most of a smoke run is one core starting
-Python, torch and the body model, and one after another they took ~9 of the suite's 16 minutes on a
-2-core AMD VM (two at a time: ~4)."""
+Python, torch and the body model, so two at a time take about half as long as one after another."""
 
 from __future__ import annotations
 
@@ -119,7 +118,7 @@ def test_out_of_range_sizes_get_one_line_and_exit_2(args):
 
 def test_machine_line_names_the_processor_and_torchs_vector_width():
     """Benchmarks print the processor, and torch's kernels' vector width once torch is imported (a peer in
-    torch runs ~1.4x faster on AVX-512, where lavapipe does not use it): ratios from two machine kinds differ."""
+    torch runs faster on AVX-512, where lavapipe does not use it): ratios from two machine kinds differ."""
     code = ("import sys; sys.path.insert(0, sys.argv[1]); from common import machine; print(machine()); "
             "import torch; print(machine()); print(torch.backends.cpu.get_cpu_capability())")
     out = subprocess.run([sys.executable, "-c", code, str(BENCH)], capture_output=True, text=True, timeout=120)

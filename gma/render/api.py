@@ -58,8 +58,8 @@ class _RasterizeFunction(torch.autograd.Function):
         camera = Camera(host_array(viewmat), host_array(K), width, height)
         bg = None if background is None else host_array(background)
         rast = rasterizer_for(gpu)
-        # The surfels' values are checked while the GPU projects them (the checks took ~1-2 ms of a
-        # ~80 ms forward on the standard scene); nothing after projection runs on values that fail.
+        # The surfels' values are checked while the GPU projects them, so the checks cost no wall time;
+        # nothing after projection runs on values that fail.
         state = rast.forward(surfels, camera, bg, replay=replay, read_images=True,
                              while_projecting=lambda: check_surfel_values(host))
         out = read_outputs(gpu, state)
