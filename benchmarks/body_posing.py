@@ -3,8 +3,8 @@ posing of the default body with N surfels per face, torch path vs WGSL path (med
 
     python benchmarks/body_posing.py [--per-face 8] [--frames 30] [--cold]
 
-``--cold`` builds anny's cache from scratch in a temporary directory (~75 s and ~1 GB of disk on a
-2-core machine); without it the cold figure is skipped. Each creation runs in a fresh subprocess so
+``--cold`` builds anny's cache from scratch in a temporary directory (a minute or more and ~1 GB of
+disk); without it the cold figure is skipped. Each creation runs in a fresh subprocess so
 that neither Python's nor anny's in-process caches help.
 
 Per-frame work measured:

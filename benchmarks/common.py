@@ -1,9 +1,8 @@
-"""Helpers shared by the benchmark scripts: timing medians, machine description, the standard workload."""
+"""Helpers shared by the benchmark scripts: timing medians, machine description, the standard scene."""
 
 from __future__ import annotations
 
 import functools
-import importlib.util
 import os
 import platform
 import statistics
@@ -13,7 +12,21 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_WORKLOAD = REPO.parent / "shared" / "bench" / "splat_workload.py"
+# The real clip some video benchmarks use: a turn from the iPER dataset, which is for research use only,
+# so the repository does not ship it (docs/data.md, "Real footage", says where to get it).
+IPER_CLIP_ENV = "GMA_IPER_CLIP"
+IPER_CLIP_DEFAULT = REPO / "data" / "iper_turn_512.gif"
+
+
+def iper_clip() -> Path:
+    """Where the iPER turn clip is looked for: ``$GMA_IPER_CLIP``, else ``data/iper_turn_512.gif``."""
+    return Path(os.environ.get(IPER_CLIP_ENV) or IPER_CLIP_DEFAULT)
+
+
+def iper_missing(clip: Path) -> str:
+    """The one line a script prints when the clip is absent."""
+    return (f"{clip}: not found; the iPER turn clip (research use only) is not shipped: see docs/data.md "
+            f"(\"Real footage\") or set {IPER_CLIP_ENV}")
 
 
 def median_ms(fn, repeats: int = 5, warmup: int = 1) -> tuple[float, list[float]]:
@@ -34,7 +47,7 @@ def median_dict(dicts: list[dict[str, float]]) -> dict[str, float]:
 
 
 def machine() -> str:
-    """The processor, its cores, the vector width torch's kernels use and the load: torch's peers get ~1.4x
+    """The processor, its cores, the vector width torch's kernels use and the load: torch's peers run
     faster on an AVX-512 processor where lavapipe stays at 256 bits, so ratios differ by machine kind."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     return f"{cpu_name()}, {os.cpu_count()} cores{_torch_simd()}, load {load:.2f}"
@@ -62,13 +75,11 @@ def _torch_simd() -> str:
 
 
 def load_standard_workload():
-    """The shared comparison scene generator (``../shared/bench/splat_workload.py``), or None."""
-    if not SHARED_WORKLOAD.is_file():
-        return None
-    spec = importlib.util.spec_from_file_location("splat_workload", SHARED_WORKLOAD)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """The standard scene's module (``splat_scene.py`` beside this file: ``make_workload``, ``WIDTH``,
+    ``HEIGHT``)."""
+    import splat_scene
+
+    return splat_scene
 
 
 def scene_tensors(workload, n: int) -> dict:
@@ -114,22 +125,13 @@ PASSES = ("project", "sort", "scan", "bin", "rasterize", "rasterize_bwd", "proje
 
 
 def scene_and_camera(count: int, kind: str = "standard", size: int = 512):
-    """``count`` surfels and a camera: the standard scene (a random scene without ../shared), or with
-    ``kind="avatar"`` avatar-like surfels (small, tangent to a body-shaped surface) at ``size`` pixels."""
-    import numpy as np
-
+    """``count`` surfels and a camera: the standard scene, or with ``kind="avatar"`` avatar-like surfels
+    (small, tangent to a body-shaped surface) at ``size`` pixels."""
     if kind == "avatar":
         from gma.render.scenes import avatar_camera, avatar_like_scene
 
         return avatar_like_scene(count), avatar_camera(size, size)
-    module = load_standard_workload()
-    if module is not None:
-        return workload_surfels(module, count)
-    from gma.core.camera import Camera
-    from gma.render.scenes import random_scene
-
-    K = np.array([[400.0, 0, 128], [0, 400.0, 128], [0, 0, 1]], np.float32)
-    return random_scene(count, 0), Camera(np.eye(4, dtype=np.float32), K, 256, 256)
+    return workload_surfels(load_standard_workload(), count)
 
 
 def pass_inputs(ctx, scene: dict, cam):

@@ -9,14 +9,10 @@ render, the mean's backward) in bursts of three, each burst after a pause of one
 
 Prints, per kind, the medians of the bursts' first steps and of their later steps, whole and by phase.
 ``peer_compare.py``'s "after idle" column is such a first step (the peer had the cores for seconds
-before it). On a 2-core Xeon VM (2026-12-03), 0.5 s pauses, first / later step: none 77.4 / 77.9 ms, sleep
-112.1 / 79.1, busy 93.7 / 78.2; after a sleep the ``clone()`` alone took 13.3 against 0.5 ms (torch's first
-parallel op wakes its OpenMP worker), the forward 44.4 against 39.4, the backward 40.3 against 36.9. With
-``OMP_NUM_THREADS=1`` (torch on one thread) the first step after a sleep took 81.5 and 80.8 against
-78.7 and 79.1 ms. Torch's OpenMP workers left spinning (now the library's default; ``gma fit`` puts them
-to sleep) changed nothing that these runs resolve (first step after a sleep 102.2 and 98.1 ms, its
-clones 16.7 and 17.7 ms; asleep, in the runs between, 95.4 and 112.2, 12.5 and 15.8 ms): the wait is torch's
-(its worker waking, presumably on an idle virtual core), not GMA's sleeping workers'.
+before it). The phases show where a first step's extra time goes: after idle cores most of it is in
+the parameters' ``clone()`` (torch's first parallel op wakes its OpenMP worker), and with torch on one
+thread (``OMP_NUM_THREADS=1``) a first step costs about what the later ones do, so the wait is torch's,
+not GMA's.
 
     python benchmarks/first_call.py [--count 100000] [--pause 0.5] [--repeats 6]
 """
@@ -33,7 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import SHARED_WORKLOAD, load_standard_workload, machine, scene_tensors  # noqa: E402
+from common import load_standard_workload, machine, scene_tensors  # noqa: E402
 
 from gma.core.args import positive_float, positive_int  # noqa: E402
 from gma.gpu import get_context  # noqa: E402
@@ -78,9 +74,6 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=positive_int, default=6, help="bursts per kind of pause")
     args = ap.parse_args(argv)
     workload = load_standard_workload()
-    if workload is None:
-        print(f"standard workload not found ({SHARED_WORKLOAD}): nothing to time")
-        return 0
     ctx = get_context()
     scene = scene_tensors(workload, args.count)
     size = (workload.WIDTH, workload.HEIGHT)

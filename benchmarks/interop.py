@@ -74,8 +74,8 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--motion", action="append", default=[], help="also report feet and root of this motion file")
     ap.add_argument("--quick", action="store_true",
-                    help="one splat and one mesh export, one round trip (each is a whole command: ~7 s on a 2-core "
-                         "machine; the test suite's smoke run)")
+                    help="one splat and one mesh export, one round trip (each is a whole command, "
+                         "seconds each; the test suite's smoke run)")
     ap.add_argument("--out", help="keep the exports and renders in this directory (new or empty)")
     args = ap.parse_args()
     if not 16 <= args.size <= 4096:

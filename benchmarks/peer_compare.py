@@ -1,21 +1,19 @@
 #!/usr/bin/env python3
-"""GMA against the comparison peer in one run (issue 15): the standard scene (../shared/bench), rendered
-through the public ``gma.render.rasterize`` call as a user would (upload, render, read back, torch tensors),
-and through gsplat 1.5.3's pure-PyTorch 2DGS path (``../shared/bench/peer_gsplat_torch.py``), both at
-torch's default thread count, each in its own process as a user would run them (GMA in a worker process:
-in the peer's process, torch's busy OpenMP workers made GMA's forward swing between 74 and 112 ms). Runs
-alternate (GMA, peer, GMA, peer, ...) so that a machine whose speed drifts affects both sides alike. Each
-turn waits for the other side's threads to settle, then renders ``--burst`` times back to back, as a user
-rendering frames or training steps in a loop would; the figures are the medians of the steps after a
-turn's first ("steady") and of the first steps alone ("after idle"). (On this 2-core virtual machine a
-GMA frame started after 50-300 ms of idle, even with the calling thread kept busy, took 68-76 ms where
-back-to-back frames took 60 ms; the peer's 1.5 s steps hardly notice.) Prints medians and the ratios.
+"""GMA against the comparison peer in one run: the standard scene (``splat_scene.py``), rendered through
+the public ``gma.render.rasterize`` call as a user would (upload, render, read back, torch tensors), and
+through gsplat 1.5.3's pure-PyTorch 2DGS path (``peer_gsplat.py``), both at torch's default thread count.
+Each side runs in its own process, as a user would run it: in one process, the peer's busy OpenMP workers
+would take the cores GMA's driver renders with. Turns alternate (GMA, peer, GMA, peer, ...) so that a
+machine whose speed drifts affects both sides alike. Each turn waits for the other side's threads to
+settle, then renders ``--burst`` times back to back, as a loop of frames or training steps would; the
+figures are the medians of the steps after a turn's first ("steady") and of the first steps alone
+("after idle": a step after idle cores also pays for waking threads). Prints medians and the ratios.
+
 ``--baseline DIR`` also times another GMA checkout (e.g. ``git worktree add /tmp/base <commit>``) in a
-worker process, interleaved the same way, so that a speed-up over our own earlier code is a ratio from
-one run too; ``--baseline . --baseline-env VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json``
-times this same code on the system's lavapipe alone instead of the newer one that
-``scripts/lavapipe_backport.py`` installs beside it (the worker's adapter is printed); the baseline's ratio to
-the peer is printed too.
+worker process, interleaved the same way, so that a speed-up over earlier code is a ratio from one run;
+``--baseline . --baseline-env VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json`` times this
+same code on the system's lavapipe alone instead of the newer one that ``scripts/lavapipe_backport.py``
+installs beside it (the worker's adapter is printed). The baseline's ratio to the peer is printed too.
 
     BUILD_NO_CUDA=1 pip install gsplat==1.5.3     # once: the peer
     python benchmarks/peer_compare.py [--counts 20000 100000] [--repeats 5] [--burst 3] [--baseline DIR]
@@ -25,7 +23,6 @@ the peer is printed too.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import statistics
 import sys
@@ -36,7 +33,6 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import (  # noqa: E402
-    SHARED_WORKLOAD,
     CheckoutWorker,
     load_standard_workload,
     machine,
@@ -48,23 +44,18 @@ from common import (  # noqa: E402
 from gma.gpu import get_context  # noqa: E402
 from gma.render import rasterize  # noqa: E402
 
-PEER = SHARED_WORKLOAD.parent / "peer_gsplat_torch.py"
 REPO = Path(__file__).resolve().parents[1]
 
 
 def load_peer():
-    """The peer's ``render`` function, or None (with the reason printed) when gsplat or the script is missing."""
-    if not PEER.is_file():
-        print(f"peer script not found: {PEER}")
+    """The peer's ``render`` function, or None (with the reason printed) when gsplat is missing."""
+    import peer_gsplat
+
+    reason = peer_gsplat.missing_reason()
+    if reason:
+        print(f"peer not measured: {reason}")
         return None
-    if importlib.util.find_spec("gsplat") is None:
-        print("gsplat is not installed: BUILD_NO_CUDA=1 pip install gsplat==1.5.3")
-        return None
-    sys.path.insert(0, str(PEER.parent))
-    spec = importlib.util.spec_from_file_location("peer_gsplat_torch", PEER)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.render
+    return peer_gsplat.load()
 
 
 def gma_step(t: dict, backward: bool, ctx, size) -> None:
@@ -77,7 +68,7 @@ def gma_step(t: dict, backward: bool, ctx, size) -> None:
 def peer_step(render, t: dict, backward: bool, size) -> None:
     params = [t[k].clone().requires_grad_(backward) for k in ("means", "quats", "scales3", "opacities", "colors")]
     with torch.set_grad_enabled(backward):
-        img = render("2dgs", *params, t["viewmat"], t["K"], *size)
+        img = render(*params, t["viewmat"], t["K"], *size)
         if backward:
             img.mean().backward()
 
@@ -155,9 +146,6 @@ def main() -> int:
     if args.burst < 2 or args.repeats < 1:
         ap.error("--burst must be >= 2 and --repeats >= 1")
     workload = load_standard_workload()
-    if workload is None:
-        print(f"standard workload not found ({SHARED_WORKLOAD}): nothing to compare")
-        return 0
     render = None if args.no_peer else load_peer()
     ctx = get_context()
     size = (workload.WIDTH, workload.HEIGHT)

@@ -65,12 +65,9 @@ def main() -> int:
     cases = [(f"avatar {n // 1000}k", avatar_like_scene(n), avatar_camera(s, s)) for n in args.counts
              for s in args.sizes]
     workload = load_standard_workload()
-    if workload is None:
-        print("standard workload not found (../shared/bench/splat_workload.py): skipped")
-    else:
-        for n in args.standard_counts:
-            scene, cam = workload_surfels(workload, n)
-            cases.append((f"standard {n / 1000:g}k", scene, cam))
+    for n in args.standard_counts:
+        scene, cam = workload_surfels(workload, n)
+        cases.append((f"standard {n / 1000:g}k", scene, cam))
     print(f"{'scene':<14} {'size':>9} {'frame ms':>9} {'isects':>9} {'Meval/s':>8}  per pass (GPU ms)")
     for name, scene, cam in cases:
         wall, passes, isects = bench_forward(ctx, rast, scene, cam, args.repeats)

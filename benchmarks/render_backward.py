@@ -91,10 +91,9 @@ def main() -> int:
     rows = [bench(ctx, f"avatar {n // 1000}k", avatar_like_scene(n), avatar_camera(512, 512), args.repeats)
             for n in args.counts]
     workload = load_standard_workload()
-    if workload is not None:
-        for n in args.standard_counts:
-            scene, cam = workload_surfels(workload, n)
-            rows.append(bench(ctx, f"standard {n / 1000:g}k", scene, cam, args.repeats))
+    for n in args.standard_counts:
+        scene, cam = workload_surfels(workload, n)
+        rows.append(bench(ctx, f"standard {n / 1000:g}k", scene, cam, args.repeats))
     # Reference forward+backward at a size it can finish.
     n_ref, size = args.reference_count, args.reference_size
     scene_np, cam = avatar_like_scene(n_ref), avatar_camera(size, size)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Two versions of the WGSL shaders against each other in one process, for shader work on a machine whose
-speed drifts (this 2-core VM's passes swing by up to 1.6x within minutes, more than most shader changes
-win). Each round renders the standard scene (forward, then backward with a random colour gradient) once
+speed drifts (a shared virtual machine's passes can swing within minutes by more than most shader
+changes win). Each round renders the standard scene (forward, then backward with a random colour gradient) once
 with each shader directory, in alternating order, through one rasterizer per directory; a round's
 GPU pass times are compared directly. Prints per pass the medians and the median of the per-round ratios
 B / A, and the images' and gradients' sums (equal sums: the change kept them, very likely bit for bit).
@@ -12,17 +12,16 @@ B / A, and the images' and gradients' sums (equal sums: the change kept them, ve
 Only the shaders differ: the Python side is this checkout's. ``--toggle OPTION`` instead renders with this
 checkout's shaders both times and two rasterizers whose ``RasterOptions`` differ in one switch, off (A) and
 on (B), the rest as the adapter's defaults (switching ``subgroups`` or ``tile_walk`` off also switches off
-what needs them), e.g. ``python benchmarks/shader_ab.py --toggle work_queues --scene avatar``. Without
-../shared's standard scene it renders a random scene of --count surfels. ``--scene avatar`` renders
-avatar-like surfels instead (small, tangent to a body-shaped surface; gma.render.scenes) at --size pixels
-square.
+what needs them), e.g. ``python benchmarks/shader_ab.py --toggle work_queues --scene avatar``.
+``--scene avatar`` renders avatar-like surfels instead of the standard scene (small, tangent to a
+body-shaped surface; gma.render.scenes) at --size pixels square.
 
 ``--public`` times whole steps of the public call instead (``gma.render.rasterize``, the mean colour's
 backward, as ``peer_compare.py`` times them), alternating the directories' pipelines under the context's
 one rasterizer, two timed steps per directory and round after an untimed one; prints the medians, the
-median of the per-step ratios B / A, and the means' gradient sums. Its resolution on the 2-core VM
-(2026-12-03): the same shaders read 1.00x and 0.98x (12 and 40 rounds), so it shows changes of the whole
-step above a few percent; the pass times above resolve smaller ones.
+median of the per-step ratios B / A, and the means' gradient sums. Two identical directories read
+within a few percent of 1.00x, so it shows changes of the whole step above that; the pass times above
+resolve smaller ones.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """Figures for the video pipeline (issue 8): seconds per frame of each stage of ``gma import video``
 on a synthetic clip with known truth, the fit's joint error against that truth and its mask IoU, and
-(with ``--iper``) the same run on the real clip ``../shared/data/iper_turn_512.gif``.
+(with ``--iper``) the same run on the real iPER clip (``common.iper_clip()``; docs/data.md says where to
+get it).
 
     python benchmarks/video_fit.py [--frames 24] [--size 256] [--threads 2] [--sheet docs/video_contact_sheet.png]
                                    [--iper] [--iper-sheet docs/video_iper_contact_sheet.png]
@@ -25,7 +26,10 @@ import torch
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
-IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
+sys.path.insert(0, str(REPO / "benchmarks"))
+from common import iper_clip, iper_missing  # noqa: E402
+
+IPER = iper_clip()
 JOINTS = ["coco:left_shoulder", "coco:right_shoulder", "coco:left_elbow", "coco:right_elbow", "coco:left_wrist",
           "coco:right_wrist", "coco:left_hip", "coco:right_hip", "coco:left_knee", "coco:right_knee",
           "coco:left_ankle", "coco:right_ankle", "coco:nose"]
@@ -108,7 +112,7 @@ def main(argv=None) -> int:
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--sheet", default=None, help="copy the synthetic clip's contact sheet here")
-    ap.add_argument("--iper", action="store_true", help="also run on ../shared/data/iper_turn_512.gif")
+    ap.add_argument("--iper", action="store_true", help="also run on the iPER clip (docs/data.md)")
     ap.add_argument("--iper-sheet", default=None, help="copy the iPER clip's contact sheet here")
     args = ap.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -143,7 +147,7 @@ def main(argv=None) -> int:
         print(f"  true phenotype {np.round(gt.body.arrays['phenotype'], 3).tolist()}")
     if args.iper:
         if not IPER.is_file():
-            print(f"\n{IPER} not found; skipping the real clip")
+            print(f"\nskipped: {iper_missing(IPER)}")
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 _, report, total = _run(IPER, Path(tmp) / "seq", None, anny, args.iper_sheet)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Phone clips in HDR: the iPER clip (``../shared/data/iper_turn_512.gif``, SDR) turned into 10-bit HLG and
+"""Phone clips in HDR: the iPER clip (``common.iper_clip()``, SDR) turned into 10-bit HLG and
 PQ the way BT.2408 places SDR white (203 cd/m²), then read back as ``gma import video`` reads it (tone
 mapped, ``gma.video.read_video``) and as plain SDR decoding would; prints the mean absolute difference to
 the SDR frames (levels, 0-255) and the decoding time per frame, and writes ``docs/video_hdr.png`` (a frame:
@@ -28,7 +28,10 @@ from gma.data.importers.video import read_frames
 from gma.video import read_video
 
 REPO = Path(__file__).resolve().parents[1]
-CLIP = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
+sys.path.insert(0, str(REPO / "benchmarks"))
+from common import iper_clip, iper_missing  # noqa: E402
+
+CLIP = iper_clip()
 TRANSFERS = {"HLG": "arib-std-b67", "PQ": "smpte2084"}
 
 
@@ -80,8 +83,8 @@ def main() -> int:
     args = ap.parse_args()
     smoke = os.environ.get("GMA_BENCH_SMOKE") == "1"
     if not CLIP.is_file():
-        print(f"clip not found: {CLIP}")
-        return 1
+        print(iper_missing(CLIP), file=sys.stderr)
+        return 2
     frames = 3 if smoke else args.frames
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)

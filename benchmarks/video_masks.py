@@ -3,7 +3,7 @@
 checked against the clip's background plate (``gma.video.matte``).
 
 A ``gma synth`` turn (true masks known) is composited over a real room — the background of
-``../shared/data/iper_turn_512.gif``, taken from that clip by the same plate estimate — written to an mp4
+iPER turn clip (``common.iper_clip()``), taken from that clip by the same plate estimate — written to an mp4
 as a phone would, decoded, and MediaPipe run on it. Printed: mask IoU (at one half) and mean absolute
 error of the soft mask against the true masks, over all frames and inside the person's bounding box, for
 MediaPipe's masks and the refined ones (with ``--size`` above 1280, also the check run at full size rather
@@ -30,7 +30,10 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
-IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
+sys.path.insert(0, str(REPO / "benchmarks"))
+from common import iper_clip, iper_missing  # noqa: E402
+
+IPER = iper_clip()
 
 
 def _scores(masks: np.ndarray, truth: np.ndarray) -> dict:
@@ -135,8 +138,8 @@ def main(argv=None) -> int:
     ap.add_argument("--figure", default=str(REPO / "docs" / "video_masks.png"))
     args = ap.parse_args(argv)
     if not IPER.is_file():
-        print(f"{IPER} not found: nothing to measure")
-        return 0
+        print(iper_missing(IPER), file=sys.stderr)
+        return 2
     if os.environ.get("GMA_BENCH_SMOKE"):
         from gma.video.matte import refine_masks  # noqa: F401  (the module imports)
 

@@ -6,7 +6,7 @@ pose fitting. The gap between the true-pose and the
 estimated-pose avatar is the price of pose estimation and of the video itself; a fourth fit, the true
 poses on the imported sequence's own frames and masks, splits the two.
 
-Then the real clip ``../shared/data/iper_turn_512.gif`` (last quarter held out): bounding-box PSNR of the
+Then the real iPER clip (``common.iper_clip()``, last quarter held out): bounding-box PSNR of the
 held-out frames without refinement, with refinement in the fit, and with test-time pose fitting too, and
 a before/after picture (``--figure``, default docs/iper_pose_refinement.png), and the refined fit without
 the left-right symmetry prior beside it (docs/iper_symmetry.png). The clip is one turn, so
@@ -35,7 +35,9 @@ import torch
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))  # run from a checkout without installing
 sys.path.insert(0, str(REPO / "benchmarks"))  # video_fit's joint helpers
-IPER = REPO.parent / "shared" / "data" / "iper_turn_512.gif"
+from common import iper_clip, iper_missing  # noqa: E402
+
+IPER = iper_clip()
 KEYS = ("psnr", "psnr_bbox", "ssim_bbox", "mask_iou")
 
 
@@ -319,7 +321,7 @@ def main(argv=None) -> int:
         if IPER.is_file():
             iper(work, args.refine_steps, body, ctx, Path(args.figure), args.interleaved)
         else:
-            print(f"{IPER} not found; skipping the real clip")
+            print(f"skipped: {iper_missing(IPER)}")
     if not args.skip_synth:
         synthetic(work, args.frames, args.size, args.refine_steps, body, ctx)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The viewer's frame qualities side by side (docs/viewer_quality.png): the full frame a settled view
 shows, and each cheaper level the viewer draws while the view moves on a slow adapter, with the time
-each takes on this machine.
+each takes where the script runs.
 
     python scripts/quality_ladder.py [--avatar out/demo/avatar.gma] [--size 400x600] [--out docs/viewer_quality.png]
 """

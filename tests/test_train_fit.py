@@ -13,7 +13,7 @@ from gma.avatar import Avatar
 from gma.train.config import preset
 from gma.train.trainer import Trainer, work_dir
 
-# Each test fits a tiny avatar for a few steps: 1-2 s apiece on a 2-core CPU.
+# Each test fits a tiny avatar for a few steps: seconds apiece on a CPU.
 pytestmark = pytest.mark.slow
 
 TINY = dict(resolution=48, checkpoint_every=1, log_every=1, preview_every=0, stage1_steps=2, stage2_steps=2,

@@ -9,8 +9,8 @@ import torch
 
 # Mean angle between fitted and true limbs, in the root's frame (degrees). The video import's own test
 # bounds the same fit at 8 px mean joint error on this 192 px clip, where a forearm is ~25 px long: that
-# is ~20° on an arm. Measured (2026-11-27): mean 19.2°, arms 25-34°, legs 7-9° (the motion import adds
-# nothing: it only turns and lifts the root, which these root-relative directions do not see).
+# is ~20° on an arm; the arms come out above that mean and the legs well below it (the motion import
+# adds nothing: it only turns and lifts the root, which these root-relative directions do not see).
 LIMB_DEG = 25.0
 LIMBS = (("upperarm01.L", "lowerarm01.L"), ("lowerarm01.L", "wrist.L"), ("upperarm01.R", "lowerarm01.R"),
          ("lowerarm01.R", "wrist.R"), ("upperleg01.L", "lowerleg01.L"), ("lowerleg01.L", "foot.L"),

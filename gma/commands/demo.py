@@ -4,7 +4,7 @@ views, write a turntable video and a novel-pose animation video, then edit it as
 be used (a painted sleeve, a logo on the chest, mirrored cuffs, a second person's trousers fitted against
 the same decoders; see gma/commands/_demo_edit.py) and write ``edited_turntable.mp4`` and a short summary.
 
-``--quick`` (default) finishes within about 15 minutes on a 2-core CPU with lavapipe; ``--full`` is the
+``--quick`` (default) finishes within minutes on a small CPU with lavapipe; ``--full`` is the
 GPU setting. Re-running continues where a killed run stopped (the sequence is reused, the fit resumes)."""
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ def register(subparsers) -> None:
     p.add_argument("--images", type=int, default=4, help="side-by-side images to write")
     p.add_argument("--refine-poses", type=int, default=0, metavar="N",
                    help="test-time pose fitting: N steps per frame with the avatar frozen (0: off; the gain flattens "
-                        "by about 300, ~30 s a frame for a quick avatar on a 2-core CPU, docs/fitting.md)")
+                        "by about 500, docs/fitting.md; a minute or more a frame on a CPU)")
     p.add_argument("--refine-resolution", type=int, default=192,
                    help="longest image side the test-time pose fitting renders at")
     p.add_argument("--refine-bones", choices=BONE_SET_NAMES, default=PoseRefineConfig().bones,
@@ -36,8 +36,7 @@ def register(subparsers) -> None:
                         "hips) or video (the ones the video fit estimates), as --pose.bones of gma fit")
     p.add_argument("--threads", type=int, default=1,
                    help="torch CPU threads (0: torch's default). 1 is fastest on a small CPU, where torch and "
-                        "the lavapipe rasteriser compete for cores (pose fitting of a quick avatar at 192 px, 2 cores, "
-                        "load 3: 0.09-0.13 s/step with 1 thread, 0.64-1.04 s with 2)")
+                        "the lavapipe rasteriser compete for cores")
     p.set_defaults(func=run)
 
 

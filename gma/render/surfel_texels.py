@@ -7,21 +7,18 @@ projection writes them in its own layout (WALK_LAYOUT in project_fwd.wgsl; surfe
 rasterizers evaluate, ray_plane.wgsl) and its colour, the ``colors4`` buffer's vec4
 its normal and depth, so that the backward walk reads one cache line per surfel. Lavapipe turns a storage
 buffer read at a lane-varying index into a loop over the lanes with a bounds check and a branch per lane
-and component, whereas it fetches a texel of a storage texture for all lanes at once: a vec4 gather from
-a 16 MB table, sequential per lane, ran 2.0-2.3x faster from an rgba32float storage texture than from an
-array<vec4<f32>> (random indices: 2.6x), where scalar reads gained nothing (r32float). Standard scene,
-100k surfels, both in one process, 10-12 rounds: forward rasterize 0.82-0.85x, backward rasterize
-0.86-0.89x, images and gradients bit-identical.
+and component, whereas it fetches a texel of a storage texture for all lanes at once, so vec4 gathers
+are much cheaper from an rgba32float storage texture than from an array<vec4<f32>> (scalar reads gain
+nothing: r32float). Images and gradients are bit-identical either way.
 
 Projection keeps writing the buffers (the backward, other variants and GPUs read those); each rasterizer
-pass first copies them into textures (a memcpy on lavapipe: ~1.5 ms of the GPU's time for 100k surfels).
+pass first copies them into textures (a memcpy on lavapipe, small against the pass).
 A render the backward will replay copies into textures leased to its state (TexelLease), which its
 backward binds as they are; other renders copy into scratch textures of one pass (the queue runs copies
 and passes in order, so renders in between cannot disturb a pass). The backward's tile walk
 writes its gradient records straight into such a texture, which project_bwd reads (scattered reads, in
-tile order). Standard scene, one process, 12-14 rounds: from a buffer, project_bwd 1.23x as long; from a
-copy of that buffer, project_bwd 0.85x of the direct texture's (its reads hit a freshly copied 14 MB)
-but the copy took ~3 ms of the step: forward+backward 1.011x.
+tile order): faster than from a buffer, and a copy of that buffer into a texture costs more than the
+faster reads of a freshly copied texture save.
 """
 
 from __future__ import annotations
@@ -64,7 +61,7 @@ class SurfelTexels:
         self.max_texels = self.max_rows * TEXEL_ROW if TEXEL_ROW <= self.max_rows else 0
         self.capacity = self.max_texels // PROJECTED_TEXELS
         # name -> (texture, its view): one view per texture, so that bind groups with it are reused
-        # (a view cost ~1 ms to make on lavapipe, and a bind group with a fresh view ~0.1 ms more).
+        # (making a view, and a bind group with a fresh view, costs lavapipe time on every call).
         self._textures: dict[str, tuple[wgpu.GPUTexture, wgpu.GPUTextureView]] = {}
         # Leases given back (give_back may run inside garbage collection, on any thread: it only appends).
         self._free_leases: list[TexelLease] = []

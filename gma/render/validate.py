@@ -29,8 +29,8 @@ def check_shape(name: str, t: torch.Tensor, shape: tuple) -> None:
 def host_array(t: torch.Tensor) -> np.ndarray:
     """``t`` as a C-contiguous float32 numpy array on the host: a view when it already is one, otherwise
     one numpy copy. Checks and conversions of the public render call run in numpy, single-threaded: torch's
-    OpenMP workers spin-wait between parallel ops, and next to lavapipe's threads on a loaded small
-    machine each such op on a 100k-surfel tensor took ~40 ms instead of 0.2 ms."""
+    OpenMP workers spin-wait between parallel ops, and next to lavapipe's threads on a busy small CPU
+    each such op waits for cores far longer than it computes."""
     t = t.detach()
     if t.device.type != "cpu":
         t = t.cpu()
@@ -40,8 +40,8 @@ def host_array(t: torch.Tensor) -> np.ndarray:
 
 
 def check_finite(name: str, a: np.ndarray) -> None:
-    # One vectorised pass; only a bad array is searched value by value, to name the first. (100k
-    # surfels' means: 0.07 ms, against 0.26 for a float64 sum, whose finiteness says the same.)
+    # One vectorised pass (cheaper than a float64 sum, whose finiteness says the same); only a bad
+    # array is searched value by value, to name the first.
     bad = ~np.isfinite(a)
     if bad.any():
         first = np.argwhere(bad)[0].tolist()
@@ -52,8 +52,8 @@ def _zero_length_rows(q: np.ndarray) -> bool:
     """Whether some row of ``q`` [N, 4] (float32, C-contiguous) has |q|^2 == 0 in float32, as
     np.linalg.norm squares it. Only rows whose four components are all below 1e-18 in size can (a
     larger one squares to >= 1e-36, which float32 holds): those are found through the row's four
-    booleans read as one 32-bit word, and checked exactly (100k rows: 0.15 against 1.0 ms for the
-    einsum over every row)."""
+    booleans read as one 32-bit word, and checked exactly (far cheaper than an einsum over every
+    row)."""
     tiny = np.ascontiguousarray(np.abs(q) < 1e-18).view(np.uint32).reshape(-1)
     candidates = tiny == 0x01010101
     if not candidates.any():

@@ -86,7 +86,7 @@ def _stage2_weights() -> LossWeights:
 class FitConfig:
     """Everything ``gma fit`` does; saved (resolved) as ``config.json`` in the fit's work folder."""
 
-    preset: str = doc("quick", "quick (2-core CPU, minutes) or full (GPU); other options override it")
+    preset: str = doc("quick", "quick (a CPU, minutes) or full (GPU); other options override it")
     seed: int = doc(0, "seeds the avatar init and the frame order: same seed, same result")
     training: str = doc("two_stage", "two_stage (paper) or one_stage (ablation: all at once)")
     stage1_steps: int = doc(80, "steps of stage 1 (geometry: coarse surfels, mesh layer)")
@@ -107,10 +107,10 @@ class FitConfig:
                                   "(gma fit, gma demo)")
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
-    cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (2x faster on CPU)")
+    cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (about half the surfels)")
     threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is the safe choice on a small or shared CPU: "
-                            "on an idle 2-core machine 0 (two threads) trained 1.6x faster, but with one other busy "
-                            "process beside it 1.45x slower, as torch's threads wait for each other's cores")
+                            "more threads are faster on idle cores but slower beside other busy processes, as "
+                            "torch's threads wait for each other's cores")
     decoders: str = doc("", "frozen shared decoders (a decoders.gma from a several-sequence fit, or any .gma "
                             "avatar): fit only the features")
     checkpoint_every: int = doc(50, "steps between atomic checkpoints (also at each stage's end)")
@@ -157,7 +157,7 @@ class FitConfig:
         return FitConfig(**d)
 
 
-# Preset = overrides of the defaults. quick: fits within minutes on a 2-core CPU through lavapipe
+# Preset = overrides of the defaults. quick: fits within minutes on a small CPU through lavapipe
 # (few, small renders; 2 fine surfels per face); full: the paper-like setting for a real GPU.
 PRESETS: dict[str, dict] = {
     "quick": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 192, "preview_every": 200,

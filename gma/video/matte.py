@@ -89,7 +89,7 @@ def background_plate(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | N
 
 def _nanmedian0(x: np.ndarray) -> np.ndarray:
     """``np.nanmedian(x, axis=0)`` (NaN where no value), the same numbers: one sort (NaNs go last) and the
-    middle of each column's values. numpy's own takes masked arrays for a short axis: 6x slower here."""
+    middle of each column's values. numpy's own takes masked arrays for a short axis, which is far slower."""
     k = (~np.isnan(x)).sum(0)
     s = np.sort(x, axis=0)
     lo = np.take_along_axis(s, np.maximum((k - 1) // 2, 0)[None], 0)[0]
@@ -210,7 +210,7 @@ def refine_masks(frames: np.ndarray, masks: np.ndarray, cfg: MatteConfig | None 
         report["reason"] = f"{T} frames: too few to see the background behind the person"
         return masks, report
     # A phone's 4K frames are checked shrunk (by 3: 1280 x 720), the decisions applied to the full masks:
-    # MediaPipe's masks are upsampled from far less than that, and at 4K the check took 3.2 s a frame.
+    # MediaPipe's masks are upsampled from far less than that, and a full-size check at 4K is slow.
     f = -(-max(H, W) // cfg.work_side)
     small_frames = frames if f == 1 else np.stack([_shrink(fr, f) for fr in frames])
     small_masks = masks if f == 1 else np.stack([_shrink(m, f) for m in masks])

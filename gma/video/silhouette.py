@@ -2,7 +2,7 @@
 
 The posed mesh is drawn as one surfel per face on a fixed random subset of faces, each enlarged to
 cover the faces left out, inside a small square crop around the detected person (e.g. 64 px) — enough
-to pull the body's outline onto the mask at a cost a 2-core CPU affords.
+to pull the body's outline onto the mask at a cost a small CPU affords.
 
 The renderer: ``gma.render.rasterize`` when it carries gradients (the WGSL renderer's autograd
 function), otherwise the pure-torch ``rasterize_reference`` (exact, slow, fine at these sizes).

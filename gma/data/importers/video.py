@@ -100,8 +100,8 @@ def read_frames(path, alpha: bool, info: dict | None = None,
     ``select = (start, end, skip)``: only frames ``start, start + skip, ... < end`` come out (``end`` None:
     to the clip's end). ffmpeg still decodes every frame (a compressed clip cannot skip), but drops the
     others before converting them, so the RGB conversion, the tone mapping and the pipe are paid for the
-    selected frames alone: every 8th frame of a 4K clip, 2.0-2.4x faster in HLG, 1.2x in SDR, where
-    decoding is most of the time (``benchmarks/video_hdr.py``)."""
+    selected frames alone, which matters most for HLG; in SDR decoding is most of the time
+    (``benchmarks/video_hdr.py``)."""
     channels = 4 if alpha else 3
     vf = [] if select is None else [select_filter(*select)]
 
@@ -129,7 +129,7 @@ def read_frames(path, alpha: bool, info: dict | None = None,
                              "imageio-ffmpeg)") from exc
 
     # The transfer from ffmpeg's description of the file first (no decoding), so that the clip is opened
-    # once: opening it to look, then again to tone-map, cost 0.7 s on a 4K clip. The stream ffmpeg
+    # once: opening a 4K clip to look and then again to tone-map would cost a second open. The stream ffmpeg
     # decodes has the last word.
     hdr = None if alpha else probe_transfer(path)  # a clip with alpha is read as it is
     gen, meta = start_sdr(hdr)

@@ -4,8 +4,8 @@
 // Lavapipe does not hand a dispatch's workgroups to its threads one at a time: each of its N threads takes
 // one contiguous run of W / N of them (llvmpipe's compute thread pool, iter_per_thread), so a pass lasts as
 // long as its slowest thread's share. Shares differ in cost (a body's upper half holds more surfels than
-// its legs), and a thread can lose its core for a while: right after a caller's torch op, torch's OpenMP
-// worker spins for ~8 ms on this 2-core VM (README, "Environment"), beside the caller's own host work.
+// its legs), and a thread can lose its core for a while: to other processes, or right after a caller's
+// torch op to torch's OpenMP workers, which spin before they sleep.
 // With a queue each subgroup takes the next piece of work from a counter in `work_queue` (declared by the
 // including shader at a binding of its own, cleared before the pass) until none is left, so a slowed
 // thread takes fewer pieces instead of holding the pass up. The results do not depend on which thread

@@ -2,8 +2,8 @@
 // variant (CPU drivers), from the block bands projection wrote (write_bands in project_fwd.wgsl).
 // Emission (emit_isects.wgsl, define BLOCK_BITS) packs them into the top SURFEL_ID_BITS.. bits of each
 // intersection's surfel id, so that a subgroup learns which listed intersections reach its pixels from
-// the ids it reads anyway: no mask pass and no mask buffer. (A pass after the tile sort that wrote each
-// intersection's mask cost 2.5-3 ms on the standard scene.)
+// the ids it reads anyway: no mask pass and no mask buffer (a pass after the tile sort that wrote each
+// intersection's mask would cost more than packing them).
 
 // The block columns [first, last] (absolute 4-pixel columns, i32) in 8-row band `band` (absolute) that a
 // surfel with block bands `w` (see write_bands in project_fwd.wgsl) can reach; first > last when none.
@@ -31,13 +31,11 @@ fn span_columns(span: vec2<i32>, tcol: u32) -> u32 {
 // centre: band 0's in bits 0-3, band 1's in bits 4-7. Each holds over its band's four block rows
 // (expand_block_bits). Strictly conservative (see block_shape in project_fwd.wgsl), so a subgroup that the surfel's box reaches but
 // this mask does not sees only alpha < 1/255 from it, which the blend skips anyway: images and
-// gradients are bit-identical to the box's. Standard scene (100k surfels, random orientations):
-// subgroup hit candidates 669k with the box, 551k with bands for every surfel; lavapipe, same runs
-// against the box, two each: forward rasterize -8 to -9 %, backward -6 to -7.5 %, projection +0.3 to
-// +0.5 ms; avatar-like scene (small surfels, no fewer hits): forward -0.5 / +0.8 %, backward -2 / +3 %
-// (noise). Tried: computing the ellipse's columns while staging (32 bytes per surfel read; standard
-// -3 to -5 %, avatar +5 to +8 %); per-band words read from 64 or 16 bytes per surfel (standard -5 to
-// -6 %, avatar +4 to +6 % and +2 to +4 %): the extra bytes per staged surfel miss the cache.
+// gradients are bit-identical to the box's. On a scene of randomly oriented surfels the bands leave a
+// sixth fewer hit candidates than the box, for a little more work in projection; on small surfels
+// (avatars) they change nothing either way. Tried: computing the ellipse's columns while staging, and
+// per-band words read from 64 or 16 bytes per surfel: faster on the random scene, slower on avatars,
+// where the extra bytes per staged surfel miss the cache.
 fn tile_block_bits(w: vec2<u32>, tile_x: u32, tile_y: u32) -> u32 {
     let band = tile_y * (TILE_SIZE / 8u);
     let tcol = tile_x * (TILE_SIZE / 4u);

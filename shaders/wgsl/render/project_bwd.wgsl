@@ -85,15 +85,13 @@ fn if_written(v: vec4<f32>, slot: u32) -> vec4<f32> {
 // V0-2 = dL/dp_ref, V3 opacity, V4-6 = dL/ddp_dx, V7 c.x, V8-10 = dL/ddp_dy, V11 c.y, V12-15 = normal and
 // depth (a fifth vec4 then holds the colours) or the colours. Tried: one thread per intersection in
 // tile order summing its surfel's records where it holds the first (neighbouring threads gather
-// neighbouring tiles' records): 25 against ~13 ms (standard scene, lavapipe), as most lanes idle.
+// neighbouring tiles' records): slower, as most lanes idle.
 // Four slots per step, in slot order as before (so the sums are bit-identical): all sixteen fetches of
 // a step (cache misses mostly: the tile walk wrote the records in tile order, they are read here by
-// surfel) are issued before any is added, and most subgroups are done after one step (2.24 slots per
-// surfel on the standard scene), where one slot per step ran as many steps as the largest count of the
-// subgroup's eight surfels. Standard scene, 100k surfels, lavapipe, both in one process (14 rounds, twice):
-// this pass 0.854x and 0.825x; avatar-like surfels (50k at 512 px, mostly one tile each) 1.014x.
-// Written differently it lost the gain: a record struct per slot, fetched and selected slot by slot
-// (1.28x this form's time), or each slot's index loaded twice, once under a short-circuit `&&` (1.07-1.10x).
+// surfel) are issued before any is added, and most subgroups are done after one step (a surfel has two
+// or three slots on the standard scene), where one slot per step runs as many steps as the largest count
+// of the subgroup's eight surfels. Written differently it loses the gain: a record struct per slot,
+// fetched and selected slot by slot, or each slot's index loaded twice, once under a short-circuit `&&`.
 fn raster_grads(i: u32) -> RasterGrads {
     let first = record_base[i];
     let end = min(first + tile_counts[i], params.isect_capacity);

@@ -18,9 +18,8 @@
 // What the rasterizers' subgroup variant needs per intersection, precomputed here once per surfel (see
 // block_bits.wgsl and composite_quad in rasterize_core.wgsl): the 4-pixel columns of each 8-row band that the surfel can reach
 // (see write_bands below; tile_block_bits turns them into the tile's blocks), and the first four colour channels as one
-// zero-padded vec4. (Standard scene, 100k surfels, lavapipe, against staging the colours as scalars and
-// the float bounds with a row loop, four same-run comparisons: forward rasterize -3 to -4.5 %, backward
-// -1 to -4 % in three and +7 % in one (noise under load); that was with a packed block rectangle.)
+// zero-padded vec4: one load per surfel in the rasterizers instead of a scalar load per channel and a
+// loop over rows.
 @group(0) @binding(10) var<storage, read_write> block_bands: array<vec2<u32>>;    // [N]
 @group(0) @binding(11) var<storage, read> colors: array<f32>;                     // [N, num_channels]
 @group(0) @binding(12) var<storage, read_write> colors4: array<vec4<f32>>;        // [N]
@@ -60,7 +59,7 @@ fn cull(i: u32) {
 #if USE_SUBGROUPS
 // With subgroups (chosen by the adapter's feature, not by the rasterizer variant): subgroup reductions,
 // then one lane adds the subgroup's share. On CPU drivers workgroup atomics are scalar loops over the
-// lanes: three per surfel cost 4.5 ms of the standard scene's 6 ms projection on lavapipe.
+// lanes: three per surfel were most of projection's time on lavapipe.
 #if WORK_QUEUE
 @group(0) @binding(15) var<storage, read_write> work_queue: array<atomic<u32>>;
 #include "common/work_queue.wgsl"
@@ -377,8 +376,8 @@ fn tile_list(bands: vec2<u32>, lo: vec2<u32>, hi: vec2<u32>) -> vec4<u32> {
 // stable). Culled surfels (CULLED_KEY, whose low 24 bits are all ones) stay behind every other.
 // The forward pass sorts only the low bits of key - min key that the frame's key range needs (stats
 // above; 18 bits, 5 passes, on the standard scene, whose depths span 2.5-3.5; 16 bits, 4 passes, on the
-// avatar-like one): the same order, so the same images. (Sort -4 % and -15 % on those scenes, projection
-// +0.4 ms for the subgroup reductions; lavapipe.) The texture path, which reads nothing back, sorts all 24.
+// avatar-like one): the same order, so the same images, and fewer radix passes for the price of the
+// subgroup reductions. The texture path, which reads nothing back, sorts all 24.
 fn depth_key(z: f32) -> u32 {
     return min((bitcast<u32>(z) - bitcast<u32>(NEAR_PLANE)) >> 4u, (CULLED_KEY >> 8u) - 1u);
 }

@@ -107,11 +107,11 @@ fn upstream_color4(p: u32) -> vec4<f32> {
 #if USE_SUBGROUPS
 // The subgroup variant (CPU drivers; at most 4 channels) gives each thread four pixels of the tile, in
 // one column at rows y, y + 2, y + 4, y + 6 (tile_pixel_quad in rasterize_core.wgsl), so that a
-// subgroup of 8 lanes covers a 4x8 pixel block instead of 4x2. Each hit's gradient is summed over the four pixels and then over the subgroup before
-// the atomic adds, and on lavapipe those adds (one locked compare-exchange per value) dominated this
-// pass: a surfel is flushed once per block it touches, and the blocks are 4x larger. The shuffles that
-// pass a surfel between the lanes are shared by the four pixels too. Standard scene, 100k surfels, this
-// pass on lavapipe: 358 ms with one pixel per thread, 273 with two, 236 with four.
+// subgroup of 8 lanes covers a 4x8 pixel block instead of 4x2. Each hit's gradient is summed over the
+// four pixels and then over the subgroup before the atomic adds, and on lavapipe those adds (one locked
+// compare-exchange per value) dominate this pass: a surfel is flushed once per block it touches, and the
+// blocks are 4x larger. The shuffles that pass a surfel between the lanes are shared by the four pixels
+// too, so more pixels per thread make this pass faster.
 
 // Replay state of one pixel (see the plain variant below for the quantities).
 struct PixelReplay {
@@ -205,19 +205,13 @@ fn replay_hit(ae: AlphaEval, k: u32, nd: vec4<f32>, col: vec4<f32>, idx: u32, r:
 // (found per surfel through the slots, see tile_walk_bwd.wgsl), RECORD_VEC2S vec2s each, summed per
 // surfel by project_bwd.wgsl. The tile
 // walk (tile_walk_bwd.wgsl, the only variant that writes them) stores each record once, from the one
-// subgroup that replays the tile: only on lavapipe (RasterOptions.grad_records; GPUs, whose
-// subgroups run concurrently, keep per-surfel atomics). History on the standard scene (100k surfels):
-// against a float atomic per value (on lavapipe a per-lane loop of locked compare-and-exchanges, about
-// a third of this pass), records that every subgroup of the tile updated with read-modify-writes at the
-// intersection's tile-sorted place made this pass 92.6-94.3 instead of 115.0-117.0 ms, the sums +12 ms
-// (a slot pass 2.5, project_bwd 15 against 5.6), the public forward 0.98x and backward 0.96x; records
-// at the emission index then made this pass ~12 ms slower (scattered read-modify-writes). Written once
-// per intersection by the tile walk, they go to the emission index: project_bwd reads each surfel's in
-// order and needs no slot list (standard scene, six alternating processes: project_bwd 0.88x by the
-// median, this pass within noise). Once the walk had become faster, those scattered stores were a
-// quarter of it, and records went back to the tile-sorted place, with slots written by the walk itself
-// (tile_walk_bwd.wgsl). The sums run in a fixed order, so the gradients are the same on every run, also
-// under load.
+// subgroup that replays the tile: only on lavapipe (RasterOptions.grad_records; GPUs, whose subgroups run
+// concurrently, keep per-surfel atomics). On lavapipe a float atomic per value is a per-lane loop of
+// locked compare-and-exchanges, a large share of this pass; plain stores into records cost less even
+// with the pass that sums them. The records sit at the intersection's tile-sorted place, where the walk
+// writes them in order (scattered stores at the emission index cost the walk more than they saved
+// project_bwd), with the slots that find them written by the walk itself (tile_walk_bwd.wgsl). The sums
+// run in a fixed order, so the gradients are the same on every run, also under load.
 #if RECORD_TEXELS
 // The records as rgba32float texels, RECORD_VEC2S / 2 per record (texel_at; gma/render/surfel_texels.py): project_bwd's scattered reads gather for all lanes at once.
 @group(0) @binding(23) var record_texels: texture_storage_2d<rgba32float, write>;
@@ -258,12 +252,9 @@ fn flush_butterfly(sid: u32, a_in: vec4<f32>, b_in: vec4<f32>, c_in: vec4<f32>, 
     // atomic as a loop over the lanes, so one lane adding all 15-19 values paid (as far as we can tell)
     // that loop 8 times per value with one lane active; spread, each loop does up to 8 adds.
     // Values are picked by selects (an indexed private array would go to scratch). Same adds,
-    // bit-identical gradients; standard scene, 100k surfels, same runs against the lane-0 flush: this
-    // pass -22 % (load 1.8-2.1). (An earlier spread, 401 against 372 ms, predates the hit lists; how it
-    // picked the values is not recorded.)
+    // bit-identical gradients, and faster than the lane-0 flush.
     // Without normal and depth gradients their slots (12-15) carry the colour gradients (copied out by
-    // project_bwd): 15 values in two rounds of adds instead of three (this pass -4 to -8 %, standard
-    // scene, 100k surfels, same runs, load 0.9-1.4).
+    // project_bwd): 15 values in two rounds of adds instead of three.
 #if NORMAL_DEPTH_GRADS
     let tail = d;
 #else
@@ -293,8 +284,7 @@ fn flush_butterfly(sid: u32, a_in: vec4<f32>, b_in: vec4<f32>, c_in: vec4<f32>, 
 // other half to its partner, 8 + 4 + 2 scalar shuffles instead of 3 x 16, and lane l ends with the
 // totals of V[l] and V[l + 8]. With normal and depth gradients the colours (`e`) follow in 2 + 1 + 1
 // instead of 3 x 4. The partners add the same operands in the same order (own + partner's) as the
-// butterfly, so the totals and the gradients are bit-identical. (Standard scene, 100k surfels,
-// lavapipe, same runs, without normal/depth gradients: this pass -8 to -15 %.)
+// butterfly, so the totals and the gradients are bit-identical.
 fn flush_scattered8(sid: u32, a: vec4<f32>, b: vec4<f32>, c: vec4<f32>, tail: vec4<f32>, e: vec4<f32>,
                     sg_lane: u32) {
     let e_total = scatter_colors8(e, sg_lane);
@@ -386,9 +376,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let mine_hit = hit_entries[row + min(h0 + sg_lane, num_hits - 1u)];
             let mine_slot = hit_slot(mine_hit);
             let mine_id = hit_surfel(mine_hit);
-            // Field by field: the normal and depth are read only when their gradients are wanted (against
-            // one load of the whole surfel, standard scene, 100k surfels, lavapipe, nine alternating runs:
-            // the backward's GPU time per forward rasterize pass lower in eight, by ~3 %).
+            // Field by field: the normal and depth are read only when their gradients are wanted (one
+            // load of the whole surfel reads them always).
             let mine_p_ref = projected[mine_id].p_ref;
             let mine_dp_dx = projected[mine_id].dp_dx;
             let mine_dp_dy = projected[mine_id].dp_dy;
@@ -479,9 +468,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // is sum_i w_i f_i (+ T_final bg for colour), so d f / d alpha_i = T_i f_i - behind_f / (1 - alpha_i),
     // where behind_f, what lies behind surfel i, is the sum of w_j f_j over later surfels j (plus T_final
     // bg). The loss needs only sum_f v_f d f / d alpha_i, in which those sums appear only as
-    // sum_f v_f behind_f: one scalar, `behind`, instead of one value per output. (Subgroup variant,
-    // standard scene, 100k surfels, lavapipe, both in one process, interleaved, 8 rounds, against a vector
-    // of sums per output: this pass 0.909x.)
+    // sum_f v_f behind_f: one scalar, `behind`, instead of one value per output.
     var T = select(1.0, final_t[p], inside);
     let last = select(0u, last_index[p], inside);
     var v_col: array<vec4<f32>, CHUNKS>;

@@ -47,12 +47,11 @@ fn background4() -> vec4<f32> {
 
 // Votes, ballots and reductions over the subgroup from xor-shuffles. Lavapipe runs subgroupBallot,
 // subgroupAny, subgroupAll and subgroupOr/Max as a loop over the lanes whose counter and result live in
-// memory (the frame of the coroutine that a shader with barriers becomes): on the standard scene the
-// backward's one vote per hit took 9 % of that pass. A xor-shuffle is one vector permute. Every lane ends
-// with the same value; the votes take lane 0's (subgroupBroadcast at a constant lane is uniform), so
-// that a branch on them is a real branch rather than masked work. (Standard scene, 100k surfels, both
-// variants in one process, interleaved, 28 rounds: forward rasterize 0.97x, backward 0.94x by the median
-// of the per-round ratios; images and gradients bit-identical.)
+// memory (the frame of the coroutine that a shader with barriers becomes), which made the backward's one
+// vote per hit a visible share of that pass. A xor-shuffle is one vector permute. Every lane ends with
+// the same value; the votes take lane 0's (subgroupBroadcast at a constant lane is uniform), so that a
+// branch on them is a real branch rather than masked work. Images and gradients are bit-identical to
+// the subgroup builtins'.
 fn lanes_or(v: u32) -> u32 {
     var r = v | subgroupShuffleXor(v, 1u);
     if SG > 2u { r |= subgroupShuffleXor(r, 2u); }   // constant conditions
@@ -101,16 +100,12 @@ fn hit_surfel(entry: u32) -> u32 {
 
 // Write, in slot order, the intersections among the `m` from list index `start` whose block bits
 // (block_bits.wgsl) meet `blocks` into hit_entries[row..] (hit_entry: the id read here comes along, so the
-// hit loops need not read it again: a gather is a loop over the lanes on lavapipe; standard scene, both in
-// one process, interleaved, two runs: forward rasterize 0.952x / 0.985x, backward 0.947x / 0.983x,
-// bit-identical); returns their number (the same in every lane).
-// Every lane stores,
-// the misses just past the hits (where later hits or nothing read them): lavapipe runs a store under a
-// divergent `if` as a loop over the lanes with a data-dependent branch per lane, and that cost more than
-// the store (standard scene, 100k surfels, same runs, against the conditional store: forward rasterize
-// -8 to -10 %, backward -2 to -5 %). Tried and no faster: per-subgroup hit bitsets built while staging
-// (ballots or xor-shuffles) so that listing reads a word per SG slots at a uniform address; the build
-// cost what the gathers saved.
+// hit loops need not read it again: a gather is a loop over the lanes on lavapipe); returns their number
+// (the same in every lane). Every lane stores, the misses just past the hits (where later hits or
+// nothing read them): lavapipe runs a store under a divergent `if` as a loop over the lanes with a
+// data-dependent branch per lane, which costs more than the store. Per-subgroup hit bitsets built while
+// staging (so that listing reads a word per SG slots at a uniform address) cost in the build what the
+// gathers saved.
 fn list_hits(start: u32, m: u32, blocks: u32, row: u32, sg_lane: u32) -> u32 {
     var count = 0u;
     for (var j = 0u; j < m; j += SG) {
@@ -158,9 +153,8 @@ struct AlphaEval {
 }
 
 // One reciprocal instead of two divisions (and the backward's three more): lavapipe's divisions are slow.
-// Tried: exp(-sigma) as a cubic polynomial of 2^frac with the exponent added to the bits (no gain to
-// hope for: standard scene, lavapipe, same runs: forward rasterize +1 to +2 %, backward +7 %; the
-// driver's own exp is already a short polynomial).
+// Tried: exp(-sigma) as a cubic polynomial of 2^frac with the exponent added to the bits: slower, since
+// the driver's own exp is already a short polynomial.
 fn alpha_from(s: ProjectedSurfel, p: vec3<f32>, d: vec2<f32>) -> AlphaEval {
     var a: AlphaEval;
     a.d = d;
@@ -285,27 +279,23 @@ fn composite_pixel(tile: u32, px: vec2<f32>, inside: bool, lid: u32) -> PixelRes
 // time, those whose block bits (block_bits.wgsl, packed into the ids by emission) meet its pixels, and a lane
 // reads the surfel it passes around (and its colour) from storage, so only surfels that touch the
 // subgroup's block are read, and none is copied through workgroup memory, whose stores lavapipe runs one
-// lane at a time. (Against staging the surfels and colours as the plain variant does, same runs on
-// lavapipe, interleaved, medians of 5: forward rasterize -12 % on a fitted avatar at 192 px, 37k
-// surfels, and -14 % on the standard scene, 100k surfels; backward -11 % and -13 %.) Lavapipe turns a
-// shader with barriers into a coroutine and keeps every variable a loop carries in the coroutine's frame,
-// writing each through the lane mask (a load, a blend and a store): against the workgroup staging the
-// batches' block masks between barriers, standard scene, alternating runs, this pass 0.75-0.85x and the
-// backward 0.70-0.77x (then with a separate mask pass, +2.5-3 ms); images and gradients bit-identical.
+// lane at a time; this is faster on lavapipe than staging the surfels and colours as the plain variant
+// does, on fitted avatars and the standard scene alike. Lavapipe turns a shader with barriers into a
+// coroutine and keeps every variable a loop carries in the coroutine's frame, writing each through the
+// lane mask (a load, a blend and a store), so this variant has no barriers at all (staging the batches'
+// block masks between barriers was slower); images and gradients are bit-identical either way.
 //
 // Each thread composites four pixels of one column, ROW_STEP apart, so that a subgroup of 8 covers a
 // 4x8 block (see tile_pixel_quad) and every surfel passed around serves four times as many pixels
-// (standard scene, 100k surfels, this pass on lavapipe: 133 ms with one pixel per thread, 102 with two,
-// 96 with four). A surfel whose footprint (block mask) misses the subgroup's block is skipped by the
-// whole subgroup at once: the intersections that can touch it first go, in order, into its row of
-// hit_entries, and only then is surfel data read, SG hits at a time. (Lavapipe runs every branch body, masked, and every loop body at
-// least once, so reading SG staged surfels per step, hit or not, paid the reads and one blend for each
-// of ~4x as many steps: standard scene, 100k surfels, forward pass -5 %, backward pass -20 %.)
-// Tried, standard and avatar-like scenes, 100k surfels, same runs against the shuffles: reading each
-// hit from workgroup memory at its (subgroup-uniform) slot, +60 %; the k loop unrolled into SG steps with
-// subgroupBroadcast at constant lanes (WGSL wants a const lane), +7 % and +12 %; recording the hit's
-// number instead of shuffling its slot for `last` (looked up once per batch), or shuffling only the
-// colour's xyz for 3 channels: within noise.
+// (fewer pixels per thread pass each surfel around more often). A surfel whose footprint (block mask)
+// misses the subgroup's block is skipped by the whole subgroup at once: the intersections that can touch
+// it first go, in order, into its row of hit_entries, and only then is surfel data read, SG hits at a
+// time. (Lavapipe runs every branch body, masked, and every loop body at least once, so reading SG
+// staged surfels per step, hit or not, would pay the reads and one blend for several times as many
+// steps.) Tried against the shuffles and slower: reading each hit from workgroup memory at its
+// (subgroup-uniform) slot; the k loop unrolled into SG steps with subgroupBroadcast at constant lanes
+// (WGSL wants a const lane). No faster: recording the hit's number instead of shuffling its slot for
+// `last`, or shuffling only the colour's xyz for 3 channels.
 const RASTER_THREADS: u32 = 64u;                  // per tile: four pixels each
 const ROW_STEP: vec2<u32> = vec2<u32>(0u, 2u);   // from one of a thread's pixels to the next
 
@@ -346,8 +336,7 @@ struct PixelBlend {
 
 // With fewer than four channels projection puts the depth in the colour's padding lane (colors4.w), so
 // that a pixel's depth sum rides in its colour sum: one register and one multiply-add fewer per pixel
-// and surfel in the inner loop, which spills, and one shuffle fewer per surfel (standard scene, 100k
-// surfels, lavapipe, nine alternating runs: this pass 0.97x by the median ratio, images bit-identical).
+// and surfel in the inner loop, which spills, and one shuffle fewer per surfel (images bit-identical).
 // The backward's replay multiplies that lane by a zero upstream gradient.
 const DEPTH_IN_COLOR: bool = CHANNELS < 4u;
 
@@ -360,10 +349,9 @@ fn start_blend(pix: vec2<u32>) -> PixelBlend {
 }
 
 // The terms of a surfel's alpha that a thread's four pixels share, at its first pixel `px`: p and the
-// offset d there. The pixels lie in one column, so p at the pixel dy rows down is p + dy dp_dy. (Against
-// two cross products per pixel, with the backward's matching change, standard scene, 100k surfels,
-// lavapipe, same run: forward rasterize -2 %, backward -20 %; p from its linear form instead of
-// (px.x T2 - T0) x (px.y T2 - T1) per surfel and thread: see ray_plane.wgsl and docs/design.md.)
+// offset d there. The pixels lie in one column, so p at the pixel dy rows down is p + dy dp_dy, which
+// spares two cross products per pixel (most in the backward); p comes from its linear form rather than
+// (px.x T2 - T0) x (px.y T2 - T1) per surfel and thread: see ray_plane.wgsl and docs/design.md.
 struct ColumnAlpha {
     p: vec3<f32>,      // at the first pixel
     d: vec2<f32>,      // at the first pixel
@@ -376,8 +364,7 @@ fn column_alpha(s: ProjectedSurfel, px: vec2<f32>) -> ColumnAlpha {
 
 // Alpha terms of the thread's pixel `k` (0-3: k ROW_STEPs below the first), forward and backward alike.
 // Pixel k's p and d are pixel k - 1's plus one row step, additions shared by the four calls, rather
-// than a multiply-add each (standard scene, both in one process, interleaved, 18 rounds: forward
-// rasterize 0.986x, backward 0.951x).
+// than a multiply-add each.
 fn quad_alpha(s: ProjectedSurfel, c: ColumnAlpha, k: u32) -> AlphaEval {
     if k == 0u {   // constant after inlining: the first pixel takes the column's own p and d
         return alpha_from(s, c.p, c.d);
@@ -513,12 +500,9 @@ fn composite_quad(tile: u32, pix: vec2<u32>, sg_lane: u32, sg_id: u32,
             let n = min(SG, num_hits - h);
             // Front to back, two hits per step: lavapipe writes a variable that a loop carries through the
             // loop's lane mask, 9 values per pixel, and copies made in the step are plain values, so
-            // the pixels' states take those writes once per two hits. (Standard scene, 100k surfels,
-            // lavapipe: when this pass still had barriers, which put those variables in memory, 64.0-67.7
-            // against 70.3-80.1 ms in alternating runs; without barriers, one hit per step 1.10x slower
-            // in one process, interleaved; four hits per step spilled registers: 82-89 ms. Images
-            // bit-identical. The backward's replay, whose flush follows every hit, is slower two per
-            // step: 1.055x.)
+            // the pixels' states take those writes once per two hits. One hit per step is slower; four
+            // spill registers. Images are bit-identical. (The backward's replay, whose flush follows
+            // every hit, stays at one per step: two were slower there.)
             for (var k = 0u; k < n; k += 2u) {
                 var sa = (*a).state;
                 var sb = (*b).state;

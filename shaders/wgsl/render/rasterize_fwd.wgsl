@@ -42,9 +42,8 @@ fn write_pixel(pix: vec2<u32>, r: PixelResult) {
 // width is a multiple of 4, every row of the block starts at a multiple of 4 pixels, and lane j stores row j
 // (gathered by shuffles) with one vec4 store per four values of each image, instead of each lane storing
 // its four pixels' values one by one: lavapipe runs a store whose address differs between lanes as a loop
-// over the lanes per component, so a vec4 costs about as much as one or two scalars. (Standard scene,
-// 100k surfels, shader_ab.py, 12 and 16 rounds: forward rasterize 0.924x and 0.950x; avatar-like surfels
-// 0.925x; images bit-identical.)
+// over the lanes per component, so a vec4 costs about as much as one or two scalars. Images are
+// bit-identical either way.
 fn write_block_pixels(block: vec2<u32>, pix: vec2<u32>, sg_lane: u32, a: PixelResult, b: PixelResult,
                       c: PixelResult, d: PixelResult) {
     if params.image_size.x % 4u != 0u {   // uniform: pixel by pixel

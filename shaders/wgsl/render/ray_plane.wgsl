@@ -19,8 +19,7 @@
 // drops below 1/255: each pixel takes the same sigma_3d, or nothing either way. Images and gradients
 // are the renderer contract's; the centre's gradient is zero there (nothing reaches it).
 //
-// Against forming p = (x T2 - T0) x (y T2 - T1) per block (standard scene, 100k surfels, lavapipe, both
-// in one process, shader_ab.py): forward rasterize 0.920x-0.962x, backward rasterize 0.955x-0.968x.
+// This is cheaper in both rasterizers than forming p = (x T2 - T0) x (y T2 - T1) per block.
 
 const RAY_PLANE_MARGIN: f32 = 4.0;
 

@@ -8,9 +8,7 @@
 // layout (project_fwd.wgsl): a surfel's 64 bytes of `projected` hold its ray plane (p_ref, dp_dx, dp_dy) and its colour
 // vec4 (channels 0-3, the depth in .w below 4 channels), and colors4 holds its normal and depth. The
 // backward walk reads only the first: one cache line per surfel instead of two (the standard layout has
-// the normal and depth beside the ray plane and the colour in colors4). Standard scene, both in one process
-// (shader_ab.py, 14 rounds, twice): backward rasterize 0.920x and 0.898x with the colour read from the T
-// rows' line (timing only). Textures (texel_at): surfel i's four vec4s of `projected` are texels 4 i + 0..3
+// the normal and depth beside the ray plane and the colour in colors4). Textures (texel_at): surfel i's four vec4s of `projected` are texels 4 i + 0..3
 // of one, its colors4 vec4 texel i of the other.
 
 #if SURFEL_TEXELS

@@ -9,28 +9,21 @@
 // replay states (BlockReplay) in its registers and stack. The surfel's gradient is summed over the
 // lane's pixels of all those blocks, then over the lanes (reduce-scatter), and written to its record
 // once, with plain stores: no other subgroup writes it. The per-subgroup variant (main in
-// rasterize_bwd.wgsl, now with atomics only) had flushed it once per block it reached, each a
-// read-modify-write of the record (2.46 blocks per intersection on the standard scene), and every
-// subgroup scanned the whole tile list.
+// rasterize_bwd.wgsl, with atomics only) flushes it once per block it reaches, and every subgroup scans
+// the whole tile list; an intersection reaches between two and three blocks on the standard scene.
 // The gradients' sums run in another order than there (within float rounding; the same on every run).
-// Standard scene, 100k surfels, lavapipe (Mesa 25.0.7, 2-core AMD EPYC), both variants in one process
-// (benchmarks/shader_ab.py, 24 rounds): forward rasterize 0.935x, backward rasterize 0.925x, images
-// bit-identical.
-// The used blocks replaced the block bits and the blocks' last-contributor counts as the test of which
-// blocks to replay (a used block has a pixel whose last contributor lies at or behind the hit), and the
-// vote before a record's store (a hit with used blocks has a pixel that took it): of the block replays
-// those allowed, the standard scene's used only 80.5 %, a fitted avatar's at 192 px (37k surfels, a
-// fit's pose steps) 65.8 %, at 512 px (50k) 93 %. Both versions in one process (shader_ab.py, 12
-// rounds each): this pass 0.878x, 0.777x and 0.981x; the forward's cost of recording them 1.017x,
-// 0.994x and 0.972x (noise); gradients identical.
+// Which blocks to replay is the forward's used blocks (a used block has a pixel that took the hit), not
+// the block bits: the block bits allow many replays that add only zeros, most of all at a fit's small
+// image sizes, and recording the used blocks costs the forward next to nothing. The same test replaces
+// a vote before a record's store (a hit with used blocks has a pixel that took it).
 
 // An intersection's record goes to its place in the tile-sorted list, so that the walk writes records
 // in order. project_bwd.wgsl finds a surfel's records through the slots: by emission index
 // (record_base[surfel] + its number within its surfel's list, above RECORD_KEY_SHIFT in its key, so a
 // surfel's slots are consecutive), the record's place + 1, or 0 where the walk stored no record (the
-// slots are cleared before the pass; no record is, nor need be). Against records at the emission index
-// (scattered stores, one cache miss each): standard scene, five alternating processes (with the
-// texels): this pass 81.8 -> 62.9 ms, project_bwd 23.0 -> 24.4 ms (its reads are now scattered).
+// slots are cleared before the pass; no record is, nor need be). Records at the emission index would
+// make this pass's stores scattered (one cache miss each); here project_bwd's reads are scattered
+// instead, which costs it less than the walk saves.
 @group(0) @binding(16) var<storage, read> isect_keys: array<u32>;   // tile-sorted keys
 @group(0) @binding(17) var<storage, read> record_base: array<u32>;  // [N] by surfel id
 @group(0) @binding(22) var<storage, read_write> record_slots: array<u32>;  // [isects] by emission index
@@ -49,9 +42,8 @@ struct BlockReplay {
 // A hit's gradient over the lane's pixels of every block it reached. p = p_ref + d.x dp_dx + d.y dp_dy
 // (ProjectedSurfel), so the ray plane's gradients are the sums of d loss / dp, unweighted and weighted by
 // the pixels' offsets d from the reference point: the record takes them as they are, and project_bwd
-// turns their sums over a surfel's records into d loss / dT once per surfel. (Forming d loss / dT per hit
-// from sums weighted by px took six cross products per hit; per block before that: this pass 0.956x
-// and 0.961x for per hit, shader_ab.py, 16 and 24 rounds.)
+// turns their sums over a surfel's records into d loss / dT once per surfel (forming d loss / dT per hit
+// would take six cross products per hit).
 struct HitTotals {
     v_p: vec3<f32>,      // sum of d loss / dp over the lane's pixels of the blocks: d loss / dp_ref
     v_p_x: vec3<f32>,    // the same, each pixel's weighted by its offset d.x: d loss / ddp_dx

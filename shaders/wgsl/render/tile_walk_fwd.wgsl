@@ -7,26 +7,24 @@
 // and passes around (shuffles) the surfel of every hit. Here one subgroup walks the tile list once, reads
 // each intersection's surfel once (one per lane, 8 at a time) and blends it into each of the tile's
 // eight blocks its block bits reach, keeping the eight blocks' pixel states (BlockBlend: a lane's four
-// pixels of the block) in its registers and stack. What the per-subgroup variant did once per block a
-// surfel reaches (2.46 blocks per intersection on the standard scene) it now does once per
+// pixels of the block) in its registers and stack. What the per-subgroup variant does once per block a
+// surfel reaches (between two and three per intersection on the standard scene) this does once per
 // intersection: the list scan, the surfel loads (lane by lane on lavapipe) and the shuffles; the bit
 // tests select the blocks through branches on subgroup-uniform values (subgroupBroadcast), which
-// lavapipe compiles as jumps. Measured in tile_walk_bwd.wgsl's header.
+// lavapipe compiles as jumps.
 //
 // Within a block it also skips the lanes' pixels k (rows 2 k, 2 k + 1 of the block) that lie outside
 // the rows of the surfel's pixel box (pixel_rows, written by projection; tile_quads in block_bits.wgsl),
-// where its alpha is below 1/255 and blending changes nothing: 33 % of the block pixels the walk would
-// evaluate on the standard scene (2.32M -> 1.55M in the tile lists), images bit-identical. Standard
-// scene, shader_ab.py, both in one process, 12 rounds: this pass 0.933x; avatar-like surfels
-// (--scene avatar, 50k, 512 px) 0.927x.
-// The backward's replay took the same skips and was slower (1.03x-1.10x in four variants: the branches
-// split its per-pixel accumulations), and exact 4x2 quads from the surfel's ellipse (43 % skipped)
-// cost more to compute per hit than they saved (+10 % for the shape alone); neither was kept.
+// where its alpha is below 1/255 and blending changes nothing: about a third of the block pixels the
+// walk would evaluate on the standard scene; images bit-identical.
+// The backward's replay is slower with the same skips (the branches split its per-pixel
+// accumulations), and exact 4x2 quads from the surfel's ellipse cost more to compute per hit than they
+// save; neither is used.
 
 #if USED_BLOCKS
 // For the backward's replay (tile_walk_bwd.wgsl), per intersection of the tile list (replayed renders):
 // the blocks (bit g) where some pixel took the surfel. The replay skips the others, where it would add
-// only zeros (measured there).
+// only zeros.
 @group(0) @binding(19) var<storage, read_write> used_blocks: array<u32>;
 #endif
 
@@ -65,7 +63,7 @@ fn block_open(b: BlockBlend, g: u32) -> u32 {
 // bit k; subgroup-uniform, so the branches are jumps): those in the rows of the surfel's box
 // (tile_quads). Each pixel's state is copied into a value of its branch and back, as in composite_quad's
 // steps (lavapipe writes a variable that a loop carries through the loop's lane mask); copying all four
-// around the branches paid a third of what this does (standard scene, shader_ab.py, 8 rounds each).
+// around the branches would pay for the pixels the branches skip.
 // Returns block_used for this lane.
 fn blend_block(h: ShuffledHit, index: u32, hit_quads: u32, g: u32, r: ptr<function, BlockBlend>) -> u32 {
     let quads = block_quads(hit_quads, g);

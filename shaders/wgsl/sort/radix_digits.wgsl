@@ -1,30 +1,26 @@
 // Digits of the radix sort and a thread's per-digit key counts. Defines: SHIFT (the digit's lowest bit);
 // KEY_BASE (optional): the sort orders key - key_base[KEY_BASE_WORD] (wrapping) rather than the key, so
 // keys known to lie in [base, base + 2^bits) sort in `bits` bits (the keys themselves move unchanged).
-// The passes read the base once per thread (key_offset): read per key, as lavapipe does not hoist a
-// storage load past the stores, it cost 1.2 ms per 100k-key sort.
+// The passes read the base once per thread (key_offset): lavapipe does not hoist a storage load past
+// the stores, so a read per key would be paid per key.
 //
 // Each of a block's SORT_WG threads (a define, >= RADIX: the count pass clears and writes one digit per
 // thread) owns SORT_ITEMS consecutive keys, which keeps the per-block ranking cheap and the sort stable.
 // GPUs take 128 threads of 16 keys. CPU drivers take 16 threads of 128 keys (gma/render/gpu_sort.py):
 // there a workgroup's threads run one after another anyway, and what a thread does per digit (histogram
 // atomics, the per-thread offsets in workgroup memory, the serial per-digit prefix over the threads)
-// costs as much as moving its keys when it has only 16 of them (lavapipe, same runs, 100k 20-bit keys:
-// 12.6-13.2 against 18.5-22.3 ms; 224k 12-bit keys: 12.1-14.2 against 23.6 ms).
+// costs as much as moving its keys when it has only 16 of them.
 //
 // A thread counts the digits of its SORT_ITEMS keys in registers, one byte per digit (counts reach at
-// most SORT_ITEMS <= 128) packed into a vec4<u32> and updated with selects. Before, a private array indexed
-// by the digit, which lavapipe turns into per-lane code: the whole sort on lavapipe, same run, load 2.3:
-// 11.4 against 12.5 ms for 100k 24-bit keys, 12.5 against 13.8 ms for 238k 10-bit keys. (5-bit digits,
-// one pass fewer for both of the renderer's sorts, with counts packed in two vec4s, were slower: 15.8 ms
-// for either, against 11.7 and 12.7 with 4 bits: the per-thread work per digit, the histogram atomics
-// and the per-digit scans, doubles.)
+// most SORT_ITEMS <= 128) packed into a vec4<u32> and updated with selects, not a private array indexed
+// by the digit, which lavapipe turns into per-lane code. (5-bit digits, one pass fewer for both of the
+// renderer's sorts, with counts packed in two vec4s, are slower: the per-thread work per digit, the
+// histogram atomics and the per-digit scans, doubles.)
 //
 // The count and scatter passes take a thread's keys two per loop step, the counts copied into a
 // step-local value: lavapipe keeps a variable that a loop carries in memory in a shader with barriers
 // (the frame of the coroutine it becomes) and writes it through the loop's lane mask, so the counts go
-// through memory once per two keys (renderer's sorts, standard scene, both in one process,
-// interleaved, 14 rounds: 0.915x; four keys per step no faster).
+// through memory once per two keys (four keys per step are no faster).
 const RADIX_BITS: u32 = 4u;   // mirrored by gma/render/gpu_sort.py
 const RADIX: u32 = 1u << RADIX_BITS;
 const SORT_ITEMS: u32 = SORT_BLOCK / SORT_WG;

@@ -1,8 +1,7 @@
 // Radix sort, pass 3 of 3: stable scatter of keys and values to their digit's place. Within a block,
 // a key's rank is (keys of the same digit owned by earlier threads) + (earlier keys of the same thread).
-// (Tried, to see whether packing the tile and surfel ids into one key would pay: not reading the values,
-// 224k 10-bit keys on lavapipe sorted no faster, 12.75 against 12.45 ms; the ranking, not the memory
-// traffic, bounds this pass.)
+// (Packing the tile and surfel ids into one key would not pay: without reading the values a sort on
+// lavapipe is no faster; the ranking, not the memory traffic, bounds this pass.)
 #include "common/render_types.wgsl"
 #include "common/sort_types.wgsl"
 #include "sort/radix_digits.wgsl"
