@@ -100,11 +100,31 @@ def _video_figures(out: str, _data: dict) -> list[tuple[str, str]]:
                                                        f"{m[1]} s"))
 
 
+def _web_figures(out: str, _data: dict) -> list[tuple[str, str]]:
+    rows = _matches(r"^page: ([\d.]+) MB", out,
+                    lambda m: ("web page (gma export .html), quick-preset-sized avatar, 4 s walk: size", f"{m[1]} MB"))
+    psnr = re.findall(r"PSNR in the person's box ([\d.]+) dB", out)
+    if psnr:
+        rows.append(("web page against gma render, PSNR in the person's box at 512x512 (frames)",
+                     " / ".join(psnr) + " dB"))
+    fps = re.findall(r"^(playing|paused) at 640²: ([\d.]+) FPS", out, re.MULTILINE)
+    if fps:
+        rows.append(("web page at 640x640, headless Chromium, software WebGL: " + " / ".join(k for k, _ in fps),
+                     " / ".join(v for _, v in fps) + " FPS"))
+    return rows
+
+
 # -- prerequisites ------------------------------------------------------------------------------------------
 def _gsplat_missing() -> str | None:
     import peer_gsplat
 
     return "gsplat not installed" if peer_gsplat.missing_reason() else None
+
+
+def _browser_missing() -> str | None:
+    import web_browser
+
+    return web_browser.missing_browser()
 
 
 def _mediapipe_missing() -> str | None:
@@ -131,6 +151,7 @@ BENCHES = [
     Bench("edit", "Editing in the viewer", "viewer_edit.py", ["--size", "640x480", "--repeats", "3"],
           ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100", "--repeats", "1",
            "--stroke-frames", "3"], _viewer_edit_figures),
+    Bench("web", "The avatar as a web page", "web_export.py", [], [], _web_figures, _browser_missing),
     Bench("peer", "Against gsplat's PyTorch 2DGS path (peer ratio)", "peer_compare.py",
           ["--counts", "100000", "--repeats", "3", "--json", "{json}"],
           ["--counts", "500", "--repeats", "1", "--json", "{json}"], _peer_figures, _gsplat_missing),
