@@ -114,12 +114,8 @@ TINY = dict(resolution=64, checkpoint_every=5, log_every=5, preview_every=0, sta
 
 
 @pytest.fixture(scope="module")
-def seq(tmp_path_factory, gpu, anny_body):
-    from gma.synth.generate import SynthConfig, synthesize
-
-    cfg = SynthConfig(width=64, height=64, train_frames=4, test_pose_frames=2, test_view_frames=1,
-                      supersample=1, texture_size=256, seed=0)
-    return synthesize(tmp_path_factory.mktemp("seq") / "s", cfg, ctx=gpu, body=anny_body, progress=False)
+def seq(tiny_sequence):
+    return tiny_sequence(0)
 
 
 def _root_error(poses: torch.Tensor, truth: torch.Tensor) -> tuple[float, float]:
