@@ -43,6 +43,8 @@ SMOKE: dict[str, list[str] | str] = {
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
     "interop.py": ["--size", "32", "--quick"],
     "edit.py": ["--repeats", "1"],
+    "pose_refine.py": ["--size", "32", "--fit-steps", "2", "--align-fit-steps", "2", "--align-steps", "1",
+                       "--refine-steps", "1"],
     "fit_step.py": ["--work", "{tmp}/work", "--baseline", "{repo}"],
     "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
                        "--repeats", "1", "--stroke-frames", "3"],
