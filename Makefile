@@ -16,7 +16,7 @@ demo: install
 	$(PYTHON) -m gma.cli demo --out out/demo
 
 test: install
-	$(PYTHON) -m pytest tests -q
+	$(PYTHON) -m pytest tests -q --durations=20
 
 lint:
 	$(PYTHON) -m ruff check gma viewer tests benchmarks

@@ -106,6 +106,26 @@ def perf_usable() -> str | None:
     return None
 
 
+def _check_args(args) -> str | None:
+    """Why the arguments cannot be used, or None."""
+    if not 0 < args.seconds <= 600:
+        return f"--seconds {args.seconds}: must lie in (0, 600]"
+    if not 1 <= args.count <= MAX_SURFELS:
+        return f"--count {args.count}: must lie in 1..{MAX_SURFELS}"
+    if not 16 <= args.size <= 4096 or not 10 <= args.frequency <= 20000:
+        return "--size must lie in 16..4096 and --frequency in 10..20000"
+    return None
+
+
+def _cannot_profile(ctx) -> str | None:
+    """Why this adapter and machine cannot be profiled, or None."""
+    if not ctx.is_lavapipe:   # its timestamps are the CPU's clock, and its passes run as CPU code
+        return "not lavapipe: nothing to profile"
+    if not ctx.has_timestamps:
+        return "the adapter has no timestamp queries: passes cannot be placed in time"
+    return perf_usable()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seconds", type=float, default=20.0, help="how long to sample")
@@ -114,24 +134,13 @@ def main() -> int:
     ap.add_argument("--size", type=int, default=512, help="image side of the avatar scene")
     ap.add_argument("--frequency", type=int, default=1999, help="samples per second and core")
     args = ap.parse_args()
-    if not 0 < args.seconds <= 600:
-        print(f"--seconds {args.seconds}: must lie in (0, 600]", file=sys.stderr)
-        return 2
-    if not 1 <= args.count <= MAX_SURFELS:
-        print(f"--count {args.count}: must lie in 1..{MAX_SURFELS}", file=sys.stderr)
-        return 2
-    if not 16 <= args.size <= 4096 or not 10 <= args.frequency <= 20000:
-        print("--size must lie in 16..4096 and --frequency in 10..20000", file=sys.stderr)
+    bad = _check_args(args)
+    if bad:
+        print(bad, file=sys.stderr)
         return 2
     ctx = get_context()
     print(f"adapter: {ctx.name}; {machine()}")
-    if not ctx.is_lavapipe:   # its timestamps are the CPU's clock, and its passes run as CPU code
-        print("not lavapipe: nothing to profile")
-        return 0
-    if not ctx.has_timestamps:
-        print("the adapter has no timestamp queries: passes cannot be placed in time")
-        return 0
-    why = perf_usable()
+    why = _cannot_profile(ctx)
     if why:
         print(why)
         return 0
@@ -148,6 +157,17 @@ def main() -> int:
 
     for _ in range(2):   # pipelines and capacities
         step()
+    recorded = _record(step, args)
+    if isinstance(recorded, str):
+        print(recorded)
+        return 0
+    _print_table(*recorded, args)
+    return 0
+
+
+def _record(step, args):
+    """Run ``step`` for ``args.seconds`` under ``perf record``: (samples, pass intervals, steps), or why
+    nothing was recorded."""
     with tempfile.TemporaryDirectory(prefix="gma-perf-") as tmp:
         data = Path(tmp) / "perf.data"
         rec = subprocess.Popen(["perf", "record", "-q", "-k", "CLOCK_MONOTONIC", "-F", str(args.frequency),
@@ -155,8 +175,7 @@ def main() -> int:
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         time.sleep(1.0)   # perf attaches to every thread
         if rec.poll() is not None:
-            print(f"perf record did not start: {rec.stderr.read().decode(errors='replace').strip()[:300]}")
-            return 0
+            return f"perf record did not start: {rec.stderr.read().decode(errors='replace').strip()[:300]}"
         intervals, steps, t_end = [], 0, time.monotonic() + args.seconds
         while time.monotonic() < t_end:
             intervals += step()
@@ -166,14 +185,18 @@ def main() -> int:
             rec.wait(timeout=60)
         except subprocess.TimeoutExpired:
             rec.kill()
-            print("perf record did not stop within 60 s after SIGINT: nothing to report")
-            return 0
+            return "perf record did not stop within 60 s after SIGINT: nothing to report"
         script = subprocess.run(["perf", "script", "-i", str(data), "-F", "time,ip,dso", "--ns"],
                                 capture_output=True, text=True, timeout=300)
     samples = parse_samples(script.stdout)
     if not samples:
-        print(f"perf recorded no samples: {script.stderr.strip()[:300]}")
-        return 0
+        return f"perf recorded no samples: {script.stderr.strip()[:300]}"
+    return samples, intervals, steps
+
+
+def _print_table(samples, intervals, steps: int, args) -> None:
+    """CPU time per pass and step by what ran (from the samples), wall time per pass, and the JIT code
+    windows that several passes share."""
     table, windows = attribute(samples, intervals)
     per_step = 1e3 / args.frequency / steps   # CPU ms per step of one sample
     wall = collections.defaultdict(float)
@@ -193,7 +216,6 @@ def main() -> int:
         for total, w, c in shared:
             by = ", ".join(f"{n} {v * per_step:.2f}" for n, v in c.most_common())
             print(f"  {w << WINDOW_BITS:#x}  {total * per_step:6.2f}  {by}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -55,23 +55,42 @@ def main() -> None:
             xvfb.terminate()
 
 
+COLORS = ["#c03030", "#3050c0", "#20a040", "#f0f0f0", "#101010", "#d0a020"]
+
+
 def run(args, tmp: Path) -> None:
-    import glfw
-    import numpy as np
     import torch
 
+    from gma.core.args import parse_image_size
+
+    torch.set_num_threads(1)  # as the viewer does (viewer/app.py)
+    size = parse_image_size(args.size)
+    bench = _open_window(args, tmp, size)
+    win, ed = bench["win"], bench["win"].state.edit
+    cand, centre = _select_chest_faces(ed, size, args.faces)
+    ed.background = False  # warm-up, synchronous (first solve allocates)
+    ed.set_color(COLORS[-1])
+    ed.fill()
+    win.draw_frame()
+    wait_gpu(bench["ctx"], bench["probe"])
+    sync = _time_fill_synchronous(bench, args.repeats)
+    background = _time_fill_background(bench, args.repeats)
+    _print_fill(bench, args, sync, background)
+    _time_strokes(bench, args, ed.view(size).px[cand], centre, size)
+    win.close()
+
+
+def _open_window(args, tmp: Path, size) -> dict:
+    """A fresh avatar in a viewer window without panels, its row uploads timed: a dict of ctx, body, win,
+    size, probe (a buffer to wait for the GPU with) and upload_ms (the uploads' times, appended per call)."""
     from gma.avatar import Avatar
     from gma.avatar.config import AvatarConfig
     from gma.body import load_body
-    from gma.core.args import parse_image_size
-    from gma.edit import Selection
     from gma.gpu import get_context
     from gma.view.source import avatar_source
     from viewer.state import ViewerState
     from viewer.window import ViewerWindow
 
-    torch.set_num_threads(1)  # as the viewer does (viewer/app.py)
-    w, h = parse_image_size(args.size)
     ctx = get_context()
     body = load_body("anny")
     path = tmp / "avatar.gma"
@@ -79,126 +98,163 @@ def run(args, tmp: Path) -> None:
     state = ViewerState(ctx, avatar_source(ctx, path))
     if args.motion:
         state.play_motion(args.motion)
-    win = ViewerWindow(state, w, h, panels=False)
-    ed, src = state.edit, state.source
-    probe = ctx.buffer(4, "bench.probe")
-    upload_ms: list[float] = []
-    real_update = src.update_rows
+    win = ViewerWindow(state, *size, panels=False)
+    bench = {"ctx": ctx, "body": body, "win": win, "size": size, "probe": ctx.buffer(4, "bench.probe"),
+             "upload_ms": []}
+    real_update = state.source.update_rows
 
     def timed_update(*a, **k):  # where the time goes: the row upload inside each edit
         t0 = time.perf_counter()
         out = real_update(*a, **k)
-        upload_ms.append((time.perf_counter() - t0) * 1e3)
+        bench["upload_ms"].append((time.perf_counter() - t0) * 1e3)
         return out
 
-    src.update_rows = timed_update
+    state.source.update_rows = timed_update
     for _ in range(5):
         win.draw_frame()
-    wait_gpu(ctx, probe)
+    wait_gpu(ctx, bench["probe"])
+    return bench
 
-    # -- 1. fill of ~N visible faces: the faces nearest the chest's screen position ---------------------
-    view = ed.view((w, h))
+
+def _select_chest_faces(ed, size, faces: int):
+    """Select the ``faces`` visible torso faces nearest the chest's screen position: (the visible torso
+    faces, the chest's pixel position)."""
+    import numpy as np
+
+    from gma.edit import Selection
+
+    view = ed.view(size)
     vis = np.nonzero(view.visible)[0]
-    torso = Selection.from_regions(body, "torso").mask().numpy()
+    torso = Selection.from_regions(ed.body, "torso").mask().numpy()
     cand = vis[torso[vis]]
     centre = np.median(view.px[cand], 0)
     order = cand[np.argsort(np.linalg.norm(view.px[cand] - centre, axis=1))]
-    ed.set_selection(Selection.from_ids(order[: args.faces], body.num_faces))
-    colors = ["#c03030", "#3050c0", "#20a040", "#f0f0f0", "#101010", "#d0a020"]
-    ed.background = False  # warm-up, synchronous (first solve allocates)
-    ed.set_color(colors[-1])
-    ed.fill()
-    win.draw_frame()
-    wait_gpu(ctx, probe)
-    # a) synchronous: the solve, the row upload and the frame one after the other (gma.edit's time)
-    total, solve, upload, frame = [], [], [], []
-    for i in range(args.repeats):
-        ed.set_color(colors[i % len(colors)])
+    ed.set_selection(Selection.from_ids(order[:faces], ed.body.num_faces))
+    return cand, centre
+
+
+def _time_fill_synchronous(bench, repeats: int) -> dict:
+    """The solve, the row upload and the frame one after the other (gma.edit's time), in ms per repeat."""
+    win, ctx, upload_ms = bench["win"], bench["ctx"], bench["upload_ms"]
+    ed = win.state.edit
+    out = {"total": [], "solve": [], "upload": [], "frame": []}
+    for i in range(repeats):
+        ed.set_color(COLORS[i % len(COLORS)])
         upload_ms.clear()
         t0 = time.perf_counter()
-        change = ed.fill()
+        out["change"] = ed.fill()
         t1 = time.perf_counter()
         win.draw_frame()
-        wait_gpu(ctx, probe)
+        wait_gpu(ctx, bench["probe"])
         t2 = time.perf_counter()
-        total.append((t2 - t0) * 1e3)
-        upload.append(sum(upload_ms))
-        solve.append((t1 - t0) * 1e3 - upload[-1])
-        frame.append((t2 - t1) * 1e3)
-    # b) as the window does it: preview at once, solve on the worker, frames go on until it lands
+        out["total"].append((t2 - t0) * 1e3)
+        out["upload"].append(sum(upload_ms))
+        out["solve"].append((t1 - t0) * 1e3 - out["upload"][-1])
+        out["frame"].append((t2 - t1) * 1e3)
+    return out
+
+
+def _time_fill_background(bench, repeats: int) -> dict:
+    """As the window does it: preview at once, solve on the worker, frames go on until it lands."""
+    win, ctx = bench["win"], bench["ctx"]
+    ed = win.state.edit
     ed.background = True
-    first, exact, frames_during = [], [], []
-    for i in range(args.repeats):
-        ed.set_color(colors[(i + 3) % len(colors)])
+    out = {"first": [], "exact": [], "frames": []}
+    for i in range(repeats):
+        ed.set_color(COLORS[(i + 3) % len(COLORS)])
         t0 = time.perf_counter()
         ed.fill()  # what the button's release calls: returns at once
         win.draw_frame()
-        wait_gpu(ctx, probe)
-        first.append((time.perf_counter() - t0) * 1e3)
+        wait_gpu(ctx, bench["probe"])
+        out["first"].append((time.perf_counter() - t0) * 1e3)
         n = 1
         while ed.busy:
             win.draw_frame()  # polls: uploads the solved rows when the worker is done
             n += 1
         win.draw_frame()
-        wait_gpu(ctx, probe)
-        exact.append((time.perf_counter() - t0) * 1e3)
-        frames_during.append(n)
+        wait_gpu(ctx, bench["probe"])
+        out["exact"].append((time.perf_counter() - t0) * 1e3)
+        out["frames"].append(n)
+    return out
+
+
+def _print_fill(bench, args, sync: dict, background: dict) -> None:
+    import torch
+
     med = statistics.median
-    print(f"device: {ctx.name}")
+    src, change = bench["win"].state.source, sync["change"]
+    w, h = bench["size"]
+    print(f"device: {bench['ctx'].name}")
     print(f"machine: {machine()}; torch threads {torch.get_num_threads()}")
-    print(f"avatar: {body.num_faces} faces x {args.fine_per_face} surfels = {len(src.decoded.colors)} surfels, "
-          f"feature_dim {args.feature_dim}; window {w}x{h}" + (f", motion {args.motion} playing" if args.motion
-                                                                else ""))
+    print(f"avatar: {bench['body'].num_faces} faces x {args.fine_per_face} surfels = {len(src.decoded.colors)} "
+          f"surfels, feature_dim {args.feature_dim}; window {w}x{h}"
+          + (f", motion {args.motion} playing" if args.motion else ""))
     print(f"1. paint of {len(change.faces)} faces, mouse release -> frame presented (GPU done), median of "
           f"{args.repeats} (goal <= 250 ms on lavapipe):")
-    print(f"   window (background solve): painted colour on screen {med(first):.0f} ms; solved features on "
-          f"screen {med(exact):.0f} ms, {med(frames_during):.0f} frames drawn meanwhile")
-    print(f"   synchronous: {med(total):.0f} ms = solve + re-decode (gma.edit) {med(solve):.0f} ms "
+    print(f"   window (background solve): painted colour on screen {med(background['first']):.0f} ms; solved "
+          f"features on screen {med(background['exact']):.0f} ms, {med(background['frames']):.0f} frames drawn "
+          "meanwhile")
+    print(f"   synchronous: {med(sync['total']):.0f} ms = solve + re-decode (gma.edit) {med(sync['solve']):.0f} ms "
           f"({change.info.get('iterations', '?')} iterations) + row upload ({len(change.rows)} rows) "
-          f"{med(upload):.1f} ms + frame draw/present/GPU wait {med(frame):.0f} ms")
-    print(f"   samples sync: {', '.join(f'{t:.0f}' for t in total)}; preview: "
-          f"{', '.join(f'{t:.0f}' for t in first)}; solved: {', '.join(f'{t:.0f}' for t in exact)} ms")
+          f"{med(sync['upload']):.1f} ms + frame draw/present/GPU wait {med(sync['frame']):.0f} ms")
+    print(f"   samples sync: {', '.join(f'{t:.0f}' for t in sync['total'])}; preview: "
+          f"{', '.join(f'{t:.0f}' for t in background['first'])}; solved: "
+          f"{', '.join(f'{t:.0f}' for t in background['exact'])} ms")
 
-    # -- 2. brush stroke through the mouse callbacks, one frame per move --------------------------------
+
+def _time_strokes(bench, args, torso_px, centre, size) -> None:
+    """Brush strokes through the mouse callbacks, one frame per move, down the torso in a wave."""
+    import numpy as np
+
+    win = bench["win"]
+    ed = win.state.edit
     ed.clear()
     ed.brush.radius = args.radius
     ed.mirror = args.mirror
     win.tool = "paint"
-    ys = view.px[cand][:, 1]
-    y0, y1 = np.percentile(ys, 10), np.percentile(ys, 90)
-    ww, wh = glfw.get_window_size(win.window)
-    sx, sy = ww / w, wh / h  # callbacks take window coordinates
+    y0, y1 = np.percentile(torso_px[:, 1], 10), np.percentile(torso_px[:, 1], 90)
     rates, solves, lands = [], [], []
     for rep in range(max(1, args.repeats // 2)):
-        ed.set_color(colors[rep % len(colors)])
+        ed.set_color(COLORS[rep % len(COLORS)])
         n = args.stroke_frames
         pts = [(centre[0] + 0.3 * (y1 - y0) * np.sin(k / n * 2 * np.pi), y0 + (y1 - y0) * k / n) for k in range(n)]
-        win._on_cursor(win.window, pts[0][0] * sx, pts[0][1] * sy)
-        win._on_button(win.window, glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
-        t0 = time.perf_counter()
-        for x, y in pts[1:]:
-            win._on_cursor(win.window, x * sx, y * sy)
-            win.draw_frame()  # applies the queued dabs: preview now, solve when the worker is free
-        wait_gpu(ctx, probe)
-        el = time.perf_counter() - t0
-        win._on_button(win.window, glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
-        t1 = time.perf_counter()
-        while ed.stroke is not None:
-            win.draw_frame()
-        wait_gpu(ctx, probe)
-        tail = time.perf_counter() - t1
+        el, tail = _drag_stroke(bench, pts, size)
         st = ed.last_stroke
         rates.append((n - 1) / el)
         solves.append(st.updates / (el + tail))
         lands.append(tail * 1e3)
         print(f"   stroke {rep}: {n - 1} frames in {el:.2f} s = {rates[-1]:.1f} FPS with the brush shown; "
               f"{st.updates} solves ({st.dabs} dabs, {st.faces} faces); after release {tail * 1e3:.0f} ms "
-              f"until solved and folded into one record ({len(src.avatar.history)} records)")
+              f"until solved and folded into one record ({len(win.state.source.avatar.history)} records)")
+    med = statistics.median
     mirrored = ", mirrored" if args.mirror else ""
     print(f"2. brush stroke (radius {args.radius:g} px{mirrored}) while dragging: median {med(rates):.1f} frames/s, "
           f"each showing the dabs so far (goal >= 5 on lavapipe); solved updates {med(solves):.1f}/s; "
           f"release -> stroke solved {med(lands):.0f} ms")
-    win.close()
+
+
+def _drag_stroke(bench, pts, size) -> tuple[float, float]:
+    """Press, move through ``pts`` (pixels) drawing a frame per move, release: (seconds while dragging,
+    seconds from the release until the stroke is solved and folded)."""
+    import glfw
+
+    win, ctx = bench["win"], bench["ctx"]
+    ww, wh = glfw.get_window_size(win.window)
+    sx, sy = ww / size[0], wh / size[1]  # callbacks take window coordinates
+    win._on_cursor(win.window, pts[0][0] * sx, pts[0][1] * sy)
+    win._on_button(win.window, glfw.MOUSE_BUTTON_LEFT, glfw.PRESS, 0)
+    t0 = time.perf_counter()
+    for x, y in pts[1:]:
+        win._on_cursor(win.window, x * sx, y * sy)
+        win.draw_frame()  # applies the queued dabs: preview now, solve when the worker is free
+    wait_gpu(ctx, bench["probe"])
+    el = time.perf_counter() - t0
+    win._on_button(win.window, glfw.MOUSE_BUTTON_LEFT, glfw.RELEASE, 0)
+    t1 = time.perf_counter()
+    while win.state.edit.stroke is not None:
+        win.draw_frame()
+    wait_gpu(ctx, bench["probe"])
+    return el, time.perf_counter() - t1
 
 
 if __name__ == "__main__":

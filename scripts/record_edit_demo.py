@@ -77,13 +77,51 @@ def main() -> None:
             xvfb.terminate()
 
 
+class Driver:
+    """The window's own callbacks, as a person's input calls them, with a screenshot per step."""
+
+    def __init__(self, win):
+        import glfw
+
+        self.glfw, self.win = glfw, win
+        self.frames: list = []
+
+    def shot(self, count: int = 1) -> None:
+        for _ in range(count):
+            self.frames.append(self.win.screenshot()[..., :3].copy())
+
+    def cursor(self, x, y) -> None:
+        self.win._on_cursor(self.win.window, x, y)
+
+    def press(self) -> None:
+        self.win._on_button(self.win.window, self.glfw.MOUSE_BUTTON_LEFT, self.glfw.PRESS, 0)
+
+    def release(self) -> None:
+        self.win._on_button(self.win.window, self.glfw.MOUSE_BUTTON_LEFT, self.glfw.RELEASE, 0)
+
+    def key(self, k) -> None:
+        self.win._on_key(self.win.window, k, 0, self.glfw.PRESS, 0)
+        self.win._on_key(self.win.window, k, 0, self.glfw.RELEASE, 0)
+
+    def drag(self, start, points) -> None:
+        """Press at ``start``, move through ``points`` with a screenshot after each, release."""
+        self.cursor(*start)
+        self.press()
+        for x, y in points:
+            self.cursor(x, y)
+            self.shot()
+        self.release()
+
+    def settle(self) -> None:
+        self.win.state.edit.wait()
+        self.shot(3)
+
+
 def record(args, tmp: Path) -> None:
-    import glfw
     import imageio.v3 as iio
     import numpy as np
     import torch
 
-    from gma.edit import Selection
     from gma.gpu import get_context
     from gma.view.source import avatar_source
     from viewer.state import ViewerState
@@ -94,108 +132,105 @@ def record(args, tmp: Path) -> None:
     ctx = get_context()
     state = ViewerState(ctx, avatar_source(ctx, avatar))
     state.orbit.zoom(4.0)  # closer: the upper body fills the frame
-    n = args.size
-    win = ViewerWindow(state, n, n, panels=False)
-    ed = state.edit
-    frames: list[np.ndarray] = []
-
-    def shot(count: int = 1) -> None:
-        for _ in range(count):
-            frames.append(win.screenshot()[..., :3].copy())
-
-    def cursor(x, y):
-        win._on_cursor(win.window, x, y)
-
-    def press(button=glfw.MOUSE_BUTTON_LEFT, mods=0):
-        win._on_button(win.window, button, glfw.PRESS, mods)
-
-    def release(button=glfw.MOUSE_BUTTON_LEFT, mods=0):
-        win._on_button(win.window, button, glfw.RELEASE, mods)
-
-    def key(k, mods=0):
-        win._on_key(win.window, k, 0, glfw.PRESS, mods)
-        win._on_key(win.window, k, 0, glfw.RELEASE, mods)
-
-    def settle():
-        ed.wait()
-        shot(3)
-
-    view = ed.view(win.size)
-    torso = Selection.from_regions(state.source.body, "torso").mask().numpy()
-    vis = np.nonzero(view.visible & torso)[0]
-    cx, cy = np.median(view.px[vis], 0)
-    top, bottom = np.percentile(view.px[vis][:, 1], [15, 85])
-    half = np.percentile(np.abs(view.px[vis][:, 0] - cx), 70)
-    shot(4)
-
-    # 1. paint stroke: red brush zig-zag across the shirt (P: paint tool)
-    key(glfw.KEY_P)
-    ed.set_color("#d23c3c")
-    ed.brush.radius = n / 28
-    path = [(cx - half + 2 * half * (k % 2), top + (bottom - top) * 0.4 * k / 6) for k in range(7)]
-    cursor(*path[0])
-    press()
-    for (x0, y0), (x1, y1) in zip(path[:-1], path[1:]):
-        for t in np.linspace(0, 1, 4)[1:]:
-            cursor(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
-            shot()
-    release()
-    settle()
-
-    # 1b. X: mirror on, a green stroke down one side of the shirt lands on both sides; X again: off
-    key(glfw.KEY_X)
-    ed.set_color("#3cb44b")
-    x = cx - 0.8 * half
-    cursor(x, top + 0.5 * (bottom - top))
-    press()
-    for t in np.linspace(0, 1, 7)[1:]:
-        cursor(x, top + (0.5 + 0.4 * t) * (bottom - top))
-        shot()
-    release()
-    key(glfw.KEY_X)
-    settle()
-
-    # 2. stamp: drop an image on the window, drag it to the chest's lower half, turn it, Enter
-    win._on_drop(win.window, [str(stamp)])
-    ed.stamp.size = n / 5
-    shot(2)
-    cursor(n / 2, n / 2)
-    press()
-    for t in np.linspace(0, 1, 6)[1:]:
-        cursor(n / 2 + t * (cx - n / 2), n / 2 + t * (top + 0.75 * (bottom - top) - n / 2))
-        shot()
-    release()
-    for _ in range(3):
-        win._on_scroll(win.window, 0, 1)  # wheel: bigger
-        shot()
-    key(glfw.KEY_ENTER)
-    key(glfw.KEY_N)
-    settle()
-
-    # 3. transfer: open the donor (drop a .gma), select the arms-and-shoulders area with a box, transfer tex
-    win._on_drop(win.window, [str(donor)])
-    ed.transfer_what = "tex"
-    shot(3)
-    key(glfw.KEY_B)
-    x0, y0, x1, y1 = cx - 1.6 * half, top - 0.1 * (bottom - top), cx + 1.6 * half, top + 0.35 * (bottom - top)
-    cursor(x0, y0)
-    press()
-    for t in np.linspace(0, 1, 5)[1:]:
-        cursor(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
-        shot()
-    release()
-    shot(2)
-    ed.transfer()
-    ed.clear()
-    settle()
-    shot(4)
+    win = ViewerWindow(state, args.size, args.size, panels=False)
+    d = Driver(win)
+    shirt = _shirt_on_screen(win)
+    d.shot(4)
+    _paint_stroke(d, shirt, args.size)
+    _mirrored_stroke(d, shirt)
+    _stamp(d, shirt, stamp, args.size)
+    _transfer(d, shirt, donor)
     win.close()
 
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(out, np.stack(frames), duration=1000 / args.fps, loop=0)
-    print(f"wrote {out}: {len(frames)} frames, {out.stat().st_size / 1e6:.2f} MB; "
+    iio.imwrite(out, np.stack(d.frames), duration=1000 / args.fps, loop=0)
+    print(f"wrote {out}: {len(d.frames)} frames, {out.stat().st_size / 1e6:.2f} MB; "
           f"history: {[r['op'] for r in state.source.avatar.history]}")
+
+
+def _shirt_on_screen(win) -> tuple[float, float, float, float, float]:
+    """Where the visible torso is: (centre x, centre y, top, bottom, half width) in pixels."""
+    import numpy as np
+
+    from gma.edit import Selection
+
+    ed = win.state.edit
+    view = ed.view(win.size)
+    torso = Selection.from_regions(ed.body, "torso").mask().numpy()
+    vis = np.nonzero(view.visible & torso)[0]
+    cx, cy = np.median(view.px[vis], 0)
+    top, bottom = np.percentile(view.px[vis][:, 1], [15, 85])
+    half = np.percentile(np.abs(view.px[vis][:, 0] - cx), 70)
+    return cx, cy, top, bottom, half
+
+
+def _paint_stroke(d: Driver, shirt, n: int) -> None:
+    """1. A red brush zig-zag across the shirt (P: paint tool)."""
+    import numpy as np
+
+    cx, _, top, bottom, half = shirt
+    ed = d.win.state.edit
+    d.key(d.glfw.KEY_P)
+    ed.set_color("#d23c3c")
+    ed.brush.radius = n / 28
+    path = [(cx - half + 2 * half * (k % 2), top + (bottom - top) * 0.4 * k / 6) for k in range(7)]
+    points = [(x0 + t * (x1 - x0), y0 + t * (y1 - y0))
+              for (x0, y0), (x1, y1) in zip(path[:-1], path[1:]) for t in np.linspace(0, 1, 4)[1:]]
+    d.drag(path[0], points)
+    d.settle()
+
+
+def _mirrored_stroke(d: Driver, shirt) -> None:
+    """1b. X: mirror on, a green stroke down one side of the shirt lands on both sides; X again: off."""
+    import numpy as np
+
+    cx, _, top, bottom, half = shirt
+    d.key(d.glfw.KEY_X)
+    d.win.state.edit.set_color("#3cb44b")
+    x = cx - 0.8 * half
+    d.drag((x, top + 0.5 * (bottom - top)), [(x, top + (0.5 + 0.4 * t) * (bottom - top))
+                                             for t in np.linspace(0, 1, 7)[1:]])
+    d.key(d.glfw.KEY_X)
+    d.settle()
+
+
+def _stamp(d: Driver, shirt, stamp: Path, n: int) -> None:
+    """2. Drop an image on the window, drag it to the chest's lower half, scale it up with the wheel, Enter."""
+    import numpy as np
+
+    cx, _, top, bottom, _ = shirt
+    win = d.win
+    win._on_drop(win.window, [str(stamp)])
+    win.state.edit.stamp.size = n / 5
+    d.shot(2)
+    d.drag((n / 2, n / 2), [(n / 2 + t * (cx - n / 2), n / 2 + t * (top + 0.75 * (bottom - top) - n / 2))
+                            for t in np.linspace(0, 1, 6)[1:]])
+    for _ in range(3):
+        win._on_scroll(win.window, 0, 1)  # wheel: bigger
+        d.shot()
+    d.key(d.glfw.KEY_ENTER)
+    d.key(d.glfw.KEY_N)
+    d.settle()
+
+
+def _transfer(d: Driver, shirt, donor: Path) -> None:
+    """3. Open the donor (drop a .gma), select the arms-and-shoulders area with a box, transfer tex."""
+    import numpy as np
+
+    cx, _, top, bottom, half = shirt
+    win, ed = d.win, d.win.state.edit
+    win._on_drop(win.window, [str(donor)])
+    ed.transfer_what = "tex"
+    d.shot(3)
+    d.key(d.glfw.KEY_B)
+    x0, y0, x1, y1 = cx - 1.6 * half, top - 0.1 * (bottom - top), cx + 1.6 * half, top + 0.35 * (bottom - top)
+    d.drag((x0, y0), [(x0 + t * (x1 - x0), y0 + t * (y1 - y0)) for t in np.linspace(0, 1, 5)[1:]])
+    d.shot(2)
+    ed.transfer()
+    ed.clear()
+    d.settle()
+    d.shot(4)
 
 
 if __name__ == "__main__":

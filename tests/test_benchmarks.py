@@ -1,12 +1,15 @@
 """Every benchmark script runs end to end in smoke mode (tiny sizes, a few steps), so none rots between
 the runs that produce the figures. Figures printed here mean nothing; the scripts' defaults give them.
 
-A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one). The scripts run two at
-a time (SMOKE_JOBS), started when the first of these tests asks: most of a smoke run is one core starting
-Python, torch and the body model, so two at a time take about half as long as one after another."""
+A new script in benchmarks/ needs a row in SMOKE (tests fail until it has one). Most of a smoke run is
+starting Python, torch, the body model and the GPU device, so the scripts share processes: two groups run
+at once (SMOKE_JOBS), each running its scripts one after another in one process (tests/smoke_runner.py),
+started when the first of these tests asks; the few that need a process of their own (OWN_PROCESS) run
+alone."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -43,6 +46,8 @@ SMOKE: dict[str, list[str] | str] = {
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
     "interop.py": ["--size", "32", "--quick"],
     "edit.py": ["--repeats", "1"],
+    "pose_refine.py": ["--size", "32", "--fit-steps", "2", "--align-fit-steps", "2", "--align-steps", "1",
+                       "--refine-steps", "1"],
     "fit_step.py": ["--work", "{tmp}/work", "--baseline", "{repo}"],
     "viewer_edit.py": ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100",
                        "--repeats", "1", "--stroke-frames", "3"],
@@ -70,6 +75,9 @@ def test_every_script_has_a_smoke_row():
 
 
 SMOKE_JOBS = min(2, os.cpu_count() or 1)
+# Scripts that get a process of their own: they time a process's first calls, or start and stop a runtime
+# (Ray) or a display (Xvfb) of their own, which a process shared with other scripts could disturb.
+OWN_PROCESS = {"first_call.py", "batch_scaling.py", "viewer_fps.py", "viewer_edit.py", "lavapipe_profile.py"}
 
 
 def _skip_reason(script: str) -> str | None:
@@ -81,22 +89,55 @@ def _skip_reason(script: str) -> str | None:
     return None
 
 
-def _run_smoke(script: str, folder: Path) -> tuple[list[str], subprocess.CompletedProcess]:
+def _run_group(scripts: list[str], root: Path) -> dict[str, dict]:
+    """Run ``scripts`` one after another in one process (tests/smoke_runner.py), each in a fresh folder
+    under ``root``: {script: {"cmd", "returncode", "stdout", "stderr"}}. A script whose result is missing
+    (the process died in it, or before it) gets the process's own output."""
+    spec, cmds = [], {}
+    for script in scripts:
+        folder = root / Path(script).stem
+        folder.mkdir()
+        args = [a.format(tmp=folder, repo=REPO) for a in SMOKE[script]]
+        spec.append([str(BENCH / script), str(folder), args])
+        cmds[script] = " ".join([sys.executable, str(BENCH / script), *args])
+    results = root / "results"
+    results.mkdir()
+    (root / "spec.json").write_text(json.dumps(spec))
     env = dict(os.environ, GMA_BENCH_SMOKE="1", PYTHONPATH=str(REPO))
-    cmd = [sys.executable, str(BENCH / script), *(a.format(tmp=folder, repo=REPO) for a in SMOKE[script])]
-    return cmd, subprocess.run(cmd, cwd=folder, env=env, capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, str(REPO / "tests" / "smoke_runner.py"), str(results),
+                           str(root / "spec.json")], cwd=root, env=env, capture_output=True, text=True,
+                          timeout=600 * len(scripts))
+    out = {}
+    for script in scripts:
+        path = results / f"{script}.json"
+        result = json.loads(path.read_text()) if path.is_file() else {
+            "returncode": proc.returncode or 1, "stdout": proc.stdout, "stderr": f"no result: {proc.stderr}"}
+        out[script] = {"cmd": cmds[script], **result}
+    return out
+
+
+def _groups(scripts: list[str]) -> list[list[str]]:
+    """The shared-process scripts in SMOKE_JOBS groups (alternating in name order), then one group per
+    script of OWN_PROCESS."""
+    shared = [s for s in scripts if s not in OWN_PROCESS]
+    return [g for g in (shared[i::SMOKE_JOBS] for i in range(SMOKE_JOBS)) if g] + \
+        [[s] for s in scripts if s in OWN_PROCESS]
 
 
 @pytest.fixture(scope="module")
 def smoke_runs(request, tmp_path_factory, anny_body) -> dict[str, Future]:
-    """The smoke runs of the runnable scripts whose tests were selected (``-k``), started in name order,
-    SMOKE_JOBS at a time. (``anny_body``: the body model's cache exists before two scripts could both set
-    out to build it.)"""
+    """The smoke runs of the runnable scripts whose tests were selected (``-k``): most share a process in
+    SMOKE_JOBS groups run at once, the rest run alone after them. (``anny_body``: the body model's cache
+    exists before two scripts could both set out to build it.)"""
     selected = {item.callspec.params["script"] for item in request.session.items
                 if getattr(item, "originalname", None) == "test_benchmark_runs"}
+    runnable = sorted(s for s in selected if _skip_reason(s) is None)
     with ThreadPoolExecutor(SMOKE_JOBS, thread_name_prefix="smoke") as pool:
-        yield {script: pool.submit(_run_smoke, script, tmp_path_factory.mktemp(Path(script).stem))
-               for script in sorted(selected) if _skip_reason(script) is None}
+        futures = {}
+        for k, group in enumerate(_groups(runnable)):
+            done = pool.submit(_run_group, group, tmp_path_factory.mktemp(f"smoke{k}"))
+            futures.update({script: done for script in group})
+        yield futures
 
 
 @pytest.mark.slow
@@ -106,8 +147,8 @@ def test_benchmark_runs(script, smoke_runs):
     reason = _skip_reason(script)
     if reason:
         pytest.skip(reason)
-    cmd, out = smoke_runs[script].result()
-    assert out.returncode == 0, f"{' '.join(cmd)}\n{out.stdout[-2000:]}\n{out.stderr[-3000:]}"
+    out = smoke_runs[script].result()[script]
+    assert out["returncode"] == 0, f"{out['cmd']}\n{out['stdout'][-2000:]}\n{out['stderr'][-3000:]}"
 
 
 @pytest.mark.parametrize("args", [["interop.py", "--size", "0"], ["interop.py", "--size", "99999"],
@@ -209,3 +250,29 @@ def test_report_refuses_bad_arguments_before_running_anything(tmp_path, args, me
                          capture_output=True, text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert run.returncode == 2 and "Traceback" not in run.stderr and run.stdout == "", run.stderr
     assert message in run.stderr.strip().splitlines()[-1]
+def test_smoke_runner_keeps_each_scripts_outcome(tmp_path):
+    """tests/smoke_runner.py runs scripts one after another in one process, each in its folder with its
+    arguments as ``__main__``, and records each one's exit status, output and traceback on its own: a
+    failing script does not stop the next, nor does its torch grad mode carry over."""
+    scripts = {
+        "ok.py": "import os, sys\nif __name__ == '__main__':\n    print('args', sys.argv[1:], os.getcwd())\n",
+        "exits.py": "import sys\nsys.exit(3)\n",
+        "raises.py": "import torch\ntorch.set_grad_enabled(False)\nraise ValueError('broken script')\n",
+        "last.py": "import torch\nprint('still ran, gradients', torch.is_grad_enabled())\n",
+    }
+    spec = []
+    for name, code in scripts.items():
+        (tmp_path / name).write_text(code)
+        (tmp_path / name[:-3]).mkdir()
+        spec.append([str(tmp_path / name), str(tmp_path / name[:-3]), ["--x", "1"]])
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    (tmp_path / "results").mkdir()
+    out = subprocess.run([sys.executable, str(REPO / "tests" / "smoke_runner.py"), str(tmp_path / "results"),
+                          str(tmp_path / "spec.json")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    res = {name: json.loads((tmp_path / "results" / f"{name}.json").read_text()) for name in scripts}
+    assert res["ok.py"]["returncode"] == 0 and f"args ['--x', '1'] {tmp_path / 'ok'}" in res["ok.py"]["stdout"]
+    assert res["exits.py"]["returncode"] == 3
+    assert res["raises.py"]["returncode"] == 1 and "ValueError: broken script" in res["raises.py"]["stderr"]
+    # ... and what a script switched off process-wide in torch is on again for the next
+    assert res["last.py"]["returncode"] == 0 and "still ran, gradients True" in res["last.py"]["stdout"]

@@ -19,12 +19,19 @@ SIZE = 256
 
 
 @pytest.fixture(scope="module")
-def session(gpu, anny_body):
+def front_view(gpu, anny_body):
+    """The front view of the avatar's canonical pose (read only: edits change features, not the mesh)."""
+    return Editor(fitted_avatar(anny_body), anny_body, gpu).named_view("front", SIZE, SIZE)
+
+
+@pytest.fixture
+def session(gpu, anny_body, front_view):
+    """A fresh editor on its own copy of the pseudo-fitted avatar (cached as bytes by ``fitted_avatar``), so
+    no test sees another's edits; with the shared front view and a renderer of this avatar."""
     av = fitted_avatar(anny_body)
     ed = Editor(av, anny_body, gpu)
-    view = ed.named_view("front", SIZE, SIZE)
     renderer = AvatarRenderer(gpu, av, anny_body, decoded=ed.decoded)
-    return ed, view, renderer
+    return ed, front_view, renderer
 
 
 def _render(renderer, ed, view, background=(1.0, 1.0, 1.0)):
@@ -61,34 +68,31 @@ def test_paint_accuracy_and_locality(session, gpu, color):
     geo = ed.model.f_geo.detach().clone()
     sel = Selection.from_regions(ed.body, "torso")
     change = ed.paint(sel, color)
-    try:
-        renderer.update_rows(change.rows, change.mesh)
-        target = torch.tensor(parse_color(color))
-        err = (ed.decoded.colors[change.rows] - target).abs()
-        assert float(err.mean()) <= 0.02 and float(err.quantile(0.99)) <= 0.06
+    renderer.update_rows(change.rows, change.mesh)
+    target = torch.tensor(parse_color(color))
+    err = (ed.decoded.colors[change.rows] - target).abs()
+    assert float(err.mean()) <= 0.02 and float(err.quantile(0.99)) <= 0.06
 
-        after = ed.avatar.decode()
-        other = ~sel.mask().repeat_interleave(ed.model.config.fine_per_face)
-        assert torch.equal(ed.model.f_geo, geo) and torch.equal(after.vertex_offsets, before.vertex_offsets)
-        for a, b in ((after.colors, before.colors), (after.binding.scale, before.binding.scale),
-                     (after.binding.uv, before.binding.uv), (after.binding.offset, before.binding.offset)):
-            assert torch.equal(a[other], b[other])
-        rel = (after.binding.scale[~other] / before.binding.scale[~other] - 1).abs()
-        assert float(rel.median()) <= 0.05
-        # The session's incremental decode agrees with a full decode of the edited features.
-        assert torch.allclose(ed.decoded.colors, after.colors, atol=1e-6)
+    after = ed.avatar.decode()
+    other = ~sel.mask().repeat_interleave(ed.model.config.fine_per_face)
+    assert torch.equal(ed.model.f_geo, geo) and torch.equal(after.vertex_offsets, before.vertex_offsets)
+    for a, b in ((after.colors, before.colors), (after.binding.scale, before.binding.scale),
+                 (after.binding.uv, before.binding.uv), (after.binding.offset, before.binding.offset)):
+        assert torch.equal(a[other], b[other])
+    rel = (after.binding.scale[~other] / before.binding.scale[~other] - 1).abs()
+    assert float(rel.median()) <= 0.05
+    # The session's incremental decode agrees with a full decode of the edited features.
+    assert torch.allclose(ed.decoded.colors, after.colors, atol=1e-6)
 
-        img = _render(renderer, ed, view)
-        cover = _coverage(gpu, ed, view, sel.mask())
-        inner = ndimage.binary_erosion(cover > 0.5, iterations=2)  # pixels the selection's surfels own
-        assert inner.sum() > 500
-        assert float(np.abs(img - target.numpy())[inner].mean()) <= 0.03
-        # Outside every pixel the selection's surfels reach at all (a junction pixel where a torso surfel
-        # peeks between arm surfels is part of the footprint even though the arm owns it).
-        outside = ~ndimage.binary_dilation(cover > 1 / 255, iterations=3)
-        assert float(np.abs(img - before_img)[outside].max()) <= 1 / 255 + 1e-6
-    finally:
-        renderer.update_rows(ed.undo().rows)
+    img = _render(renderer, ed, view)
+    cover = _coverage(gpu, ed, view, sel.mask())
+    inner = ndimage.binary_erosion(cover > 0.5, iterations=2)  # pixels the selection's surfels own
+    assert inner.sum() > 500
+    assert float(np.abs(img - target.numpy())[inner].mean()) <= 0.03
+    # Outside every pixel the selection's surfels reach at all (a junction pixel where a torso surfel
+    # peeks between arm surfels is part of the footprint even though the arm owns it).
+    outside = ~ndimage.binary_dilation(cover > 1 / 255, iterations=3)
+    assert float(np.abs(img - before_img)[outside].max()) <= 1 / 255 + 1e-6
 
 
 def test_soft_brush_keeps_unpainted_surfels(session):
@@ -102,15 +106,12 @@ def test_soft_brush_keeps_unpainted_surfels(session):
     weights = torch.zeros(len(sel), nk)
     weights[:, 0] = 1.0  # paint the first surfel of every face only
     change = ed.paint(sel, "black", surfel_weights=weights)
-    try:
-        new = ed.decoded.colors.reshape(-1, nk, 3)[sel.faces]
-        w = sel.face_weights()[:, None]
-        expect = (1 - w) * old[:, 0]
-        assert float((new[:, 0] - expect).abs().mean()) <= 0.03
-        assert float((new[:, 1:] - old[:, 1:]).abs().mean()) <= 0.02
-        assert change.record["params"]["soft"]
-    finally:
-        ed.undo()
+    new = ed.decoded.colors.reshape(-1, nk, 3)[sel.faces]
+    w = sel.face_weights()[:, None]
+    expect = (1 - w) * old[:, 0]
+    assert float((new[:, 0] - expect).abs().mean()) <= 0.03
+    assert float((new[:, 1:] - old[:, 1:]).abs().mean()) <= 0.02
+    assert change.record["params"]["soft"]
 
 
 def test_stamp_psnr_and_hidden_surfels(session, gpu):
@@ -131,41 +132,38 @@ def test_stamp_psnr_and_hidden_surfels(session, gpu):
     centre = view.px[torso].mean(0) - np.array([0.0, 15.0])
     placement = StampPlacement(tuple(centre), 48, "px")
     change = ed.stamp(pattern, view, placement)
-    try:
-        renderer.update_rows(change.rows, change.mesh)
-        img = _render(renderer, ed, view)
-        # The pattern composited onto the old render, in screen space.
-        ys, xs = np.mgrid[0:SIZE, 0:SIZE] + 0.5
-        u = ((xs - centre[0]) / 48 + 0.5) * 128
-        v = ((ys - centre[1]) / 48 + 0.5) * 128
-        inside = (u >= 2) & (u < 126) & (v >= 2) & (v < 126)
-        expect = before_img.copy()
-        expect[inside] = pattern[v[inside].astype(int), u[inside].astype(int), :3]
-        touched = _coverage(gpu, ed, view, torch.isin(torch.arange(ed.num_faces), change.faces)) > 0.95
-        area = ndimage.binary_erosion(inside & touched, iterations=1)
-        assert area.sum() > 500
-        mse = float(np.square(img - expect)[area].mean())
-        psnr = 10 * np.log10(1.0 / mse)
-        assert psnr >= 22.0, psnr
-        # Faces hidden from the stamping view (facing away, or 3 cm or more behind the visible surface)
-        # are not touched at all.
-        after = ed.avatar.decode()
-        _, z, _ = face_centres_on_screen(view.vertices, view.faces, view.camera)
-        ix = np.clip(view.px[:, 0].astype(int), 0, SIZE - 1)
-        iy = np.clip(view.px[:, 1].astype(int), 0, SIZE - 1)
-        behind = z > view.ids.depth[iy, ix] + 0.03
-        tri = view.vertices[view.faces].astype(np.float64)
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        eye = -view.camera.viewmat[:3, :3].T @ view.camera.viewmat[:3, 3]
-        to_eye = eye - tri.mean(1)
-        cos = (normal * to_eye).sum(1) / np.linalg.norm(normal, axis=1) / np.linalg.norm(to_eye, axis=1)
-        # Grazing faces at a silhouette are left out: their centre may be hidden while surfels show.
-        hidden = (cos < -0.2) | (behind & (cos > 0.2))
-        hidden = torch.from_numpy(hidden).repeat_interleave(ed.model.config.fine_per_face)
-        assert hidden.sum() > len(hidden) // 3
-        assert torch.equal(after.colors[hidden], before.colors[hidden])
-    finally:
-        renderer.update_rows(ed.undo().rows)
+    renderer.update_rows(change.rows, change.mesh)
+    img = _render(renderer, ed, view)
+    # The pattern composited onto the old render, in screen space.
+    ys, xs = np.mgrid[0:SIZE, 0:SIZE] + 0.5
+    u = ((xs - centre[0]) / 48 + 0.5) * 128
+    v = ((ys - centre[1]) / 48 + 0.5) * 128
+    inside = (u >= 2) & (u < 126) & (v >= 2) & (v < 126)
+    expect = before_img.copy()
+    expect[inside] = pattern[v[inside].astype(int), u[inside].astype(int), :3]
+    touched = _coverage(gpu, ed, view, torch.isin(torch.arange(ed.num_faces), change.faces)) > 0.95
+    area = ndimage.binary_erosion(inside & touched, iterations=1)
+    assert area.sum() > 500
+    mse = float(np.square(img - expect)[area].mean())
+    psnr = 10 * np.log10(1.0 / mse)
+    assert psnr >= 22.0, psnr
+    # Faces hidden from the stamping view (facing away, or 3 cm or more behind the visible surface)
+    # are not touched at all.
+    after = ed.avatar.decode()
+    _, z, _ = face_centres_on_screen(view.vertices, view.faces, view.camera)
+    ix = np.clip(view.px[:, 0].astype(int), 0, SIZE - 1)
+    iy = np.clip(view.px[:, 1].astype(int), 0, SIZE - 1)
+    behind = z > view.ids.depth[iy, ix] + 0.03
+    tri = view.vertices[view.faces].astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    eye = -view.camera.viewmat[:3, :3].T @ view.camera.viewmat[:3, 3]
+    to_eye = eye - tri.mean(1)
+    cos = (normal * to_eye).sum(1) / np.linalg.norm(normal, axis=1) / np.linalg.norm(to_eye, axis=1)
+    # Grazing faces at a silhouette are left out: their centre may be hidden while surfels show.
+    hidden = (cos < -0.2) | (behind & (cos > 0.2))
+    hidden = torch.from_numpy(hidden).repeat_interleave(ed.model.config.fine_per_face)
+    assert hidden.sum() > len(hidden) // 3
+    assert torch.equal(after.colors[hidden], before.colors[hidden])
 
 
 def test_stamp_errors(session):
@@ -187,13 +185,8 @@ def test_update_rows_matches_a_fresh_upload(session, gpu):
         donor.model.f_geo.add_(0.5)
     changes = [ed.paint(Selection.from_regions(ed.body, "arms"), "blue"),
                ed.transfer(donor, Selection.from_regions(ed.body, "legs"), "geo")]
-    try:
-        for ch in changes:
-            renderer.update_rows(ch.rows, ch.mesh)
-        assert changes[1].mesh
-        fresh = AvatarRenderer(gpu, ed.avatar, ed.body, decoded=ed.decoded)
-        assert np.array_equal(_render(renderer, ed, view), _render(fresh, ed, view))
-    finally:
-        for _ in changes:
-            ch = ed.undo()
-            renderer.update_rows(ch.rows, ch.mesh)
+    for ch in changes:
+        renderer.update_rows(ch.rows, ch.mesh)
+    assert changes[1].mesh
+    fresh = AvatarRenderer(gpu, ed.avatar, ed.body, decoded=ed.decoded)
+    assert np.array_equal(_render(renderer, ed, view), _render(fresh, ed, view))

@@ -20,23 +20,15 @@ TINY = dict(resolution=48, checkpoint_every=1, log_every=1, preview_every=0, sta
             avatar={"feature_dim": 8, "fine_per_face": 1})
 
 
-def _tiny_sequence(folder, seed, gpu, anny_body):
-    from gma.synth.generate import SynthConfig, synthesize
-
-    cfg = SynthConfig(width=64, height=64, train_frames=4, test_pose_frames=2, test_view_frames=1,
-                      supersample=1, texture_size=256, seed=seed)
-    return synthesize(folder, cfg, ctx=gpu, body=anny_body, progress=False)
+@pytest.fixture(scope="module")
+def seq(tiny_sequence):
+    return tiny_sequence(0)
 
 
 @pytest.fixture(scope="module")
-def seq(tmp_path_factory, gpu, anny_body):
-    return _tiny_sequence(tmp_path_factory.mktemp("seq") / "s", 0, gpu, anny_body)
-
-
-@pytest.fixture(scope="module")
-def other_seq(tmp_path_factory, gpu, anny_body):
+def other_seq(tiny_sequence):
     """A second person (another seed: other clothes, texture and identity)."""
-    return _tiny_sequence(tmp_path_factory.mktemp("seq2") / "t", 1, gpu, anny_body)
+    return tiny_sequence(1)
 
 
 def _fit(seq, out, anny_body, gpu, resume=False, **kw):
@@ -150,7 +142,9 @@ def test_decoders_trained_over_several_sequences(seq, other_seq, anny_body, gpu,
                  progress=False)
     init = {k: v.clone() for k, v in tr.model.decoder_state().items()}
     tr.run()
-    a, b = Avatar.load(tmp_path / "shared" / "s.gma", anny_body), Avatar.load(tmp_path / "shared" / "t.gma", anny_body)
+    shared = tmp_path / "shared"
+    a = Avatar.load(shared / f"{seq.root.name}.gma", anny_body)
+    b = Avatar.load(shared / f"{other_seq.root.name}.gma", anny_body)
     dec = load_decoders(tmp_path / "shared" / "decoders.gma", a.config)
     # One set of decoders, trained (it moved), written identically into both avatars and the decoders file.
     assert set(dec) == set(init) and any(not torch.equal(init[k], dec[k]) for k in dec)
@@ -158,7 +152,8 @@ def test_decoders_trained_over_several_sequences(seq, other_seq, anny_body, gpu,
         assert torch.equal(v, a.model.decoder_state()[k]) and torch.equal(v, b.model.decoder_state()[k]), k
     # Each person has its own features and body identity.
     assert not torch.equal(a.model.f_tex, b.model.f_tex) and not torch.equal(a.shape, b.shape)
-    assert a.info["decoders_shared_with"] == ["s", "t"] and a.info["sequence"] == str(seq.root)
+    assert a.info["decoders_shared_with"] == [seq.root.name, other_seq.root.name]
+    assert a.info["sequence"] == str(seq.root)
     # Steps take the sequences in turn.
     history = json.loads((work_dir(tmp_path / "shared") / "metrics.json").read_text())["history"]
     assert [h["subject"] for h in history] == [0, 1, 0, 1]

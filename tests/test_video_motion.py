@@ -32,21 +32,13 @@ def root_frame_limbs(body, pose: torch.Tensor) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_motion_from_synthetic_video(tmp_path, gpu, anny_body):
+def test_motion_from_synthetic_video(tmp_path, synth_clip, anny_body):
     pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
-    import imageio.v3 as iio
-
     from gma.body.motion_files import load_motion_file
-    from gma.synth.generate import SynthConfig, synthesize
     from gma.video import FitConfig, VideoImportConfig
     from gma.video.motion import estimate_motion
 
-    cfg = SynthConfig(width=192, height=192, train_frames=10, test_pose_frames=0, test_view_frames=0,
-                      supersample=2, texture_size=512)
-    seq = synthesize(tmp_path / "synth", cfg, ctx=gpu, body=anny_body, progress=False)
-    clip = tmp_path / "clip.mp4"
-    iio.imwrite(clip, np.stack([seq.image(i) for i in range(len(seq))]), fps=10, codec="libx264",
-                macro_block_size=16)
+    seq, clip = synth_clip
     vcfg = VideoImportConfig(focal=float(seq.cameras.K[0, 0, 0]),
                              fit=FitConfig(iters_root=40, iters_pose=150, iters_shape=6))
     motion, report = estimate_motion(clip, tmp_path / "m.npz", config=vcfg, progress=False, anny=anny_body)

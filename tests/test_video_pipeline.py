@@ -23,23 +23,6 @@ BODY_JOINTS = ["coco:left_shoulder", "coco:right_shoulder", "coco:left_elbow", "
 
 
 @pytest.fixture(scope="module")
-def synth_clip(tmp_path_factory, gpu, anny_body):
-    """A 10-frame synthetic turn (192 px) and its mp4 encoding."""
-    import imageio.v3 as iio
-
-    from gma.synth.generate import SynthConfig, synthesize
-
-    root = tmp_path_factory.mktemp("video")
-    cfg = SynthConfig(width=192, height=192, train_frames=10, test_pose_frames=0, test_view_frames=0,
-                      supersample=2, texture_size=512)
-    seq = synthesize(root / "synth", cfg, ctx=gpu, body=anny_body, progress=False)
-    frames = np.stack([seq.image(i) for i in range(len(seq))])
-    clip = root / "clip.mp4"
-    iio.imwrite(clip, frames, fps=10, codec="libx264", macro_block_size=16)
-    return seq, clip
-
-
-@pytest.fixture(scope="module")
 def rig(anny_body):
     from gma.video.rig import AnnyRig
 

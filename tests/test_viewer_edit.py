@@ -238,7 +238,7 @@ def test_keep_body_refuses_values_outside_the_body_range(avatar_state):
 
 def test_merge_records_keeps_the_oldest_value_of_each_face():
     from gma.edit.history import make_record, record_face_ids, record_old
-    from viewer.editing import merge_records
+    from viewer.edit import merge_records
 
     hist = [{"op": "body"}]
     hist.append(make_record("paint", {}, torch.tensor([1, 2]), {"f_tex": torch.tensor([[1.0], [2.0]])}))
@@ -250,7 +250,7 @@ def test_merge_records_keeps_the_oldest_value_of_each_face():
 
 
 def test_stamp_corners_follow_the_sampling_rotation():
-    from viewer.editing import StampState
+    from viewer.edit import StampState
 
     st = StampState(np.zeros((10, 20, 4), np.float32), "x", centre=(50, 40), size=40, rotation=90)
     c = st.corners(100, 80)
@@ -317,3 +317,45 @@ def test_select_unseen_highlights_what_the_fit_never_saw(avatar_state):
     finally:
         avatar.face_seen = kept
         ed.clear()
+def test_worker_runs_one_job_started_only_when_asked():
+    """The edit worker queues one job on a thread that starts only on ``start`` (the window starts it after
+    presenting the preview frame); a failed job hands its error back instead of raising on the thread."""
+    import threading
+
+    from viewer.edit.worker import EditJob, EditWorker
+
+    gate = threading.Event()
+    worker = EditWorker()
+    job = EditJob("paint", lambda: gate.wait(30) and "change")
+    worker.submit(job)
+    assert worker.busy and not job.started
+    assert worker.take_finished(start=False) is None and not job.started  # polling does not start it
+    with pytest.raises(RuntimeError, match="already running"):
+        worker.submit(EditJob("fill", lambda: None))
+    worker.start()
+    assert worker.take_finished() is None  # still running
+    gate.set()
+    assert worker.join() is job and job.change == "change" and job.error is None and not worker.busy
+    assert worker.join() is None
+    failing = EditJob("stamp", lambda: 1 / 0)
+    worker.submit(failing)
+    assert worker.join() is failing and isinstance(failing.error, ZeroDivisionError) and failing.change is None
+
+
+def test_every_tool_has_a_key_and_errors_become_the_status_line():
+    from types import SimpleNamespace
+
+    from gma.core.errors import InputError
+    from viewer.actions import TOOLS, report
+    from viewer.window import _TOOL_KEYS
+
+    assert sorted(_TOOL_KEYS.values()) == sorted(TOOLS)
+    state = SimpleNamespace(message="")
+
+    def bad():
+        raise InputError("x.gma: not an avatar\nsecond line")
+
+    assert report(state, bad) is None and state.message == "x.gma: not an avatar"
+    assert report(state, lambda a, b=0: a + b, 1, b=2) == 3
+    with pytest.raises(ZeroDivisionError):  # a bug is not a user error: it keeps its traceback
+        report(state, lambda: 1 / 0)

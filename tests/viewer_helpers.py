@@ -72,17 +72,14 @@ def avatar_state(gpu, anny_body, small_avatar_file, tmp_path):
 
 
 @pytest.fixture(scope="session")
-def fitted_avatar_file(gpu, anny_body, tmp_path_factory):
+def fitted_avatar_file(gpu, anny_body, tmp_path_factory, tiny_sequence):
     """An avatar fitted with the quick preset's surfel layout (two fine surfels a face, about 55k visible
     from the front: more intersections than the renderer's first capacity guess) for a few steps."""
-    from gma.synth.generate import SynthConfig, synthesize
     from gma.train.config import preset
     from gma.train.trainer import Trainer
 
     root = tmp_path_factory.mktemp("fitted")
-    seq = synthesize(root / "seq", SynthConfig(width=64, height=64, train_frames=4, test_pose_frames=1,
-                                               test_view_frames=1, supersample=1, texture_size=256),
-                     ctx=gpu, body=anny_body, progress=False)
+    seq = tiny_sequence(0)
     cfg = preset("quick", resolution=48, stage1_steps=2, stage2_steps=2, checkpoint_every=2, log_every=1,
                  preview_every=0)
     Trainer(cfg, seq, root / "fitted.gma", body=anny_body, ctx=gpu, progress=False).run()

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from viewer.window import ViewerWindow
 
     # One intra-op thread: the edit solves run beside lavapipe's (or the driver's) threads and the frame
-    # loop; with two OpenMP threads on a busy 2-core machine a 1,000-face paint took 9 s instead of 0.7 s.
+    # loop, and more OpenMP threads than free cores make every solve wait on the busiest of them.
     torch.set_num_threads(1)
     width, height = args.size
     ctx = get_context()

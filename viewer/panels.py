@@ -12,8 +12,7 @@ from wgpu.utils.imgui.imgui_backend import ImguiWgpuBackend
 
 from gma.body.motions import MOTIONS
 from gma.core.errors import GmaError
-from viewer.editing import report
-from viewer.window import TOOLS
+from viewer.actions import TOOLS, report
 
 __all__ = ["Panels"]
 
@@ -216,7 +215,23 @@ class Panels:
 
     def _edit_panel(self) -> None:
         """Select / Paint / Stamp / Transfer / History / File. Each widget calls one EditTools method
-        (errors become the status line, see :func:`viewer.editing.report`)."""
+        (errors become the status line, see :func:`viewer.actions.report`)."""
+        self._select_section()
+        if not self.state.edit.can_edit:
+            imgui.text("(open a fitted .gma to paint, stamp and transfer)")
+            return
+        if imgui.collapsing_header("Paint", imgui.TreeNodeFlags_.default_open):
+            self._paint_section()
+        if imgui.collapsing_header("Stamp"):
+            self._stamp_section()
+        if imgui.collapsing_header("Transfer"):
+            self._transfer_section()
+        if imgui.collapsing_header("History", imgui.TreeNodeFlags_.default_open):
+            self._history_section()
+        if imgui.collapsing_header("File", imgui.TreeNodeFlags_.default_open):
+            self._file_section()
+
+    def _select_section(self) -> None:
         s, w, ed = self.state, self.window, self.state.edit
         changed, i = imgui.combo("tool", TOOLS.index(w.tool), list(TOOLS))
         if changed:
@@ -246,77 +261,84 @@ class Panels:
                 report(s, action, self.selection_path)
             imgui.same_line()
         imgui.new_line()
-        if not ed.can_edit:
-            imgui.text("(open a fitted .gma to paint, stamp and transfer)")
-            return
-        if imgui.collapsing_header("Paint", imgui.TreeNodeFlags_.default_open):
-            changed, col = imgui.color_edit3("colour", list(ed.color))
-            if changed:
-                ed.set_color(col)
-            changed, text = imgui.input_text("hex", self._hex if self._hex is not None else ed.hex_color,
-                                             imgui.InputTextFlags_.enter_returns_true)
-            self._hex = text if imgui.is_item_active() else None
-            if changed:
-                report(s, ed.set_color, text)
-                self._hex = None
-            if imgui.button("fill selection (F)"):
-                report(s, ed.fill)
+
+    def _paint_section(self) -> None:
+        s, w, ed = self.state, self.window, self.state.edit
+        changed, col = imgui.color_edit3("colour", list(ed.color))
+        if changed:
+            ed.set_color(col)
+        changed, text = imgui.input_text("hex", self._hex if self._hex is not None else ed.hex_color,
+                                         imgui.InputTextFlags_.enter_returns_true)
+        self._hex = text if imgui.is_item_active() else None
+        if changed:
+            report(s, ed.set_color, text)
+            self._hex = None
+        if imgui.button("fill selection (F)"):
+            report(s, ed.fill)
+        imgui.same_line()
+        if imgui.button("paint brush (P)"):
+            w.tool = "paint"
+        imgui.same_line()
+        if imgui.button("eyedropper (I)"):
+            w.tool = "eyedropper"
+        if ed.last_stroke.update_ms:
+            ms = sorted(ed.last_stroke.update_ms)[len(ed.last_stroke.update_ms) // 2]
+            imgui.text(f"last stroke: {ed.last_stroke.updates} updates, median {ms:.0f} ms")
+
+    def _stamp_section(self) -> None:
+        s, w, ed = self.state, self.window, self.state.edit
+        _, self.stamp_path = imgui.input_text("image file", self.stamp_path)
+        imgui.same_line()
+        if imgui.button("load##stamp") and report(s, ed.load_stamp, self.stamp_path) is not None:
+            w.tool = "stamp"
+        imgui.text("or drop an image on the window; drag moves, Shift+drag rotates, wheel scales")
+        if ed.stamp is not None:
+            st = ed.stamp
+            _, st.size = imgui.slider_float("size (px)", st.size, 4.0, 1024.0)
+            _, st.rotation = imgui.slider_float("rotation", st.rotation, -180.0, 180.0)
+            _, ed.stamp_in_selection = imgui.checkbox("only in the selection", ed.stamp_in_selection)
+            if imgui.button("apply stamp (Enter)"):
+                report(s, ed.apply_stamp, w.size)
+
+    def _transfer_section(self) -> None:
+        s, ed = self.state, self.state.edit
+        _, self.donor_path = imgui.input_text("donor .gma", self.donor_path)
+        imgui.same_line()
+        if imgui.button("open##donor"):
+            report(s, ed.load_donor, self.donor_path)
+        imgui.text(f"donor: {ed.donor_name or '(none; or drop a .gma on the window)'}")
+        for what in ("geo", "tex", "both"):
+            if imgui.radio_button(what, ed.transfer_what == what):
+                ed.transfer_what = what
             imgui.same_line()
-            if imgui.button("paint brush (P)"):
-                w.tool = "paint"
-            imgui.same_line()
-            if imgui.button("eyedropper (I)"):
-                w.tool = "eyedropper"
-            if ed.last_stroke.update_ms:
-                ms = sorted(ed.last_stroke.update_ms)[len(ed.last_stroke.update_ms) // 2]
-                imgui.text(f"last stroke: {ed.last_stroke.updates} updates, median {ms:.0f} ms")
-        if imgui.collapsing_header("Stamp"):
-            _, self.stamp_path = imgui.input_text("image file", self.stamp_path)
-            imgui.same_line()
-            if imgui.button("load##stamp") and report(s, ed.load_stamp, self.stamp_path) is not None:
-                w.tool = "stamp"
-            imgui.text("or drop an image on the window; drag moves, Shift+drag rotates, wheel scales")
-            if ed.stamp is not None:
-                st = ed.stamp
-                _, st.size = imgui.slider_float("size (px)", st.size, 4.0, 1024.0)
-                _, st.rotation = imgui.slider_float("rotation", st.rotation, -180.0, 180.0)
-                _, ed.stamp_in_selection = imgui.checkbox("only in the selection", ed.stamp_in_selection)
-                if imgui.button("apply stamp (Enter)"):
-                    report(s, ed.apply_stamp, w.size)
-        if imgui.collapsing_header("Transfer"):
-            _, self.donor_path = imgui.input_text("donor .gma", self.donor_path)
-            imgui.same_line()
-            if imgui.button("open##donor"):
-                report(s, ed.load_donor, self.donor_path)
-            imgui.text(f"donor: {ed.donor_name or '(none; or drop a .gma on the window)'}")
-            for what in ("geo", "tex", "both"):
-                if imgui.radio_button(what, ed.transfer_what == what):
-                    ed.transfer_what = what
-                imgui.same_line()
-            if imgui.button("transfer to selection"):
-                report(s, ed.transfer)
-        if imgui.collapsing_header("History", imgui.TreeNodeFlags_.default_open):
-            if imgui.button("undo (Ctrl+Z)"):
-                report(s, ed.undo)
-            imgui.same_line()
-            if imgui.button("redo (Ctrl+Shift+Z)"):
-                report(s, ed.redo)
-            records = ed.history()
-            imgui.text(f"{len(records)} records; click one to revert to it")
-            if imgui.selectable("0  (as opened / fitted)", len(records) == 0)[0]:
-                report(s, ed.revert, 0)
-            for k, line in enumerate(records[-12:], start=max(len(records) - 12, 0) + 1):
-                if imgui.selectable(f"{k}  {line.strip()}", k == len(records))[0]:
-                    report(s, ed.revert, k)
-        if imgui.collapsing_header("File", imgui.TreeNodeFlags_.default_open):
-            name = str(ed.path) if ed.path else "(none)"
-            imgui.text(f"{name}{' (unsaved edits)' if ed.dirty else ''}")
-            if imgui.button("save (Ctrl+S)"):
-                report(s, ed.save)
-            _, self.save_as_path = imgui.input_text("save as", self.save_as_path)
-            imgui.same_line()
-            if imgui.button("save##as"):
-                report(s, ed.save, self.save_as_path)
+        if imgui.button("transfer to selection"):
+            report(s, ed.transfer)
+
+    def _history_section(self) -> None:
+        s, ed = self.state, self.state.edit
+        if imgui.button("undo (Ctrl+Z)"):
+            report(s, ed.undo)
+        imgui.same_line()
+        if imgui.button("redo (Ctrl+Shift+Z)"):
+            report(s, ed.redo)
+        records = ed.history()
+        imgui.text(f"{len(records)} records; click one to revert to it")
+        if imgui.selectable("0  (as opened / fitted)", len(records) == 0)[0]:
+            report(s, ed.revert, 0)
+        for k, line in enumerate(records[-12:], start=max(len(records) - 12, 0) + 1):
+            if imgui.selectable(f"{k}  {line.strip()}", k == len(records))[0]:
+                report(s, ed.revert, k)
+
+    def _file_section(self) -> None:
+        s, ed = self.state, self.state.edit
+        name = str(ed.path) if ed.path else "(none)"
+        imgui.text(f"{name}{' (unsaved edits)' if ed.dirty else ''}")
+        if imgui.button("save (Ctrl+S)"):
+            report(s, ed.save)
+        _, self.save_as_path = imgui.input_text("save as", self.save_as_path)
+        imgui.same_line()
+        if imgui.button("save##as"):
+            report(s, ed.save, self.save_as_path)
 
     def _confirm_close(self) -> None:
         """The unsaved-edits question, while the window holds a close request."""

@@ -1,6 +1,6 @@
 """The viewer's state and its action API, independent of the window: everything a panel, a mouse gesture
 or a test can do (orbit, presets, playback, body sliders, selection, recording) is a method here; the
-edit tools (selection, paint, stamp, transfer, history, save) are ``state.edit`` (:mod:`viewer.editing`)."""
+edit tools (selection, paint, stamp, transfer, history, save) are ``state.edit`` (:mod:`viewer.edit`)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from gma.gpu import GpuContext
 from gma.view import CameraPath, FrameRenderer, OrbitCamera, Scene, SurfelSource
 from gma.view.controls import BodyControls, load_motion
 from gma.view.record import Recorder
-from viewer.editing import EditTools
+from viewer.edit import EditTools
 
 __all__ = ["RecordSettings", "ViewerState"]
 

@@ -2,7 +2,7 @@
 keyboard input mapped to :class:`ViewerState` actions, the frame loop, and screenshots of the surface.
 
 Every gesture is translated into a call on :class:`ViewerState` or its edit tools
-(:class:`viewer.editing.EditTools`); the window itself holds no tool logic.
+(:class:`viewer.edit.EditTools`); the window itself holds no tool logic.
 
 Mouse: left drag orbits (navigate), selects (box, lasso, brush; Shift adds, Ctrl subtracts), paints
 (paint: strokes with the brush), picks (wand, eyedropper: click) or moves the stamp (stamp; Shift+drag
@@ -29,13 +29,12 @@ from gma.core.errors import DeviceError
 from gma.view.quality import FULL, QualityGovernor
 from gma.view.renderer import read_texture
 from gma.view.timing import FrameStats
-from viewer.editing import report
+from viewer.actions import report
 from viewer.state import ViewerState
 
-__all__ = ["TOOLS", "ViewerWindow"]
+__all__ = ["ViewerWindow"]
 
-# Tools a left drag / click uses; the keys choosing them.
-TOOLS = ("navigate", "box", "lasso", "brush", "wand", "paint", "eyedropper", "stamp")
+# The key choosing each tool.
 _TOOL_KEYS = {glfw.KEY_N: "navigate", glfw.KEY_B: "box", glfw.KEY_L: "lasso", glfw.KEY_C: "brush",
               glfw.KEY_M: "wand", glfw.KEY_P: "paint", glfw.KEY_I: "eyedropper", glfw.KEY_T: "stamp"}
 
@@ -93,14 +92,14 @@ class ViewerWindow:
         self.last_quality = FULL  # what the last frame drew (None: it showed the previous full frame again)
         self.ui = None
         if panels:
-            try:
+            try:  # imported here because imgui-bundle is optional
                 from viewer.panels import Panels
             except ImportError as exc:  # imgui-bundle missing: keyboard/mouse only
                 print(f"viewer: panels disabled ({exc}); install imgui-bundle for them")
             else:
                 self.ui = Panels(self, self.format)
         if state.edit is not None:
-            state.edit.background = True  # solves run beside the frame loop (see viewer.editing)
+            state.edit.background = True  # solves run beside the frame loop (see viewer.edit)
         self._drag: dict | None = None
         self._mods = 0
         self._cursor = (0.0, 0.0)  # last cursor position in window coordinates (from the callback)

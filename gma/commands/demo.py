@@ -33,23 +33,15 @@ def format_metric(name: str, value: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-
-    from gma.avatar.gpu import AvatarRenderer
-    from gma.avatar.posing import frame_params
-    from gma.avatar.video import orbit_cameras, render_turntable, sequence_camera, write_video
-    from gma.body import load_body, motion
+    from gma.body import load_body
     from gma.commands._demo_edit import edit_stage
     from gma.commands._openmp_workers import openmp_workers_asleep
-    from gma.core.atomic import atomic_write_bytes, atomic_write_json
-    from gma.data import read_sequence
     from gma.edit.unseen import AfterFit
     from gma.gpu import get_context
     from gma.render.api import around_device_work
-    from gma.render.image_io import save_png
-    from gma.synth.generate import SynthConfig, synthesize
     from gma.train.config import preset
     from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
-    from gma.train.trainer import Trainer, work_dir
+    from gma.train.trainer import Trainer
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -60,13 +52,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"[demo] adapter: {ctx.name}; preset {args.preset}")
 
     t0 = time.perf_counter()
-    seq_dir = out / "sequence"
-    if (seq_dir / "splits.json").is_file():
-        seq = read_sequence(seq_dir)
-        print(f"[demo] reusing {seq_dir}")
-    else:
-        seq = synthesize(seq_dir, SynthConfig(seed=args.seed), ctx=ctx, body=body)
-        print(f"[demo] synthesised {seq_dir}: {len(seq)} frames at {seq.width}x{seq.height}")
+    seq = _sequence(out / "sequence", args.seed, body, ctx)
     times["synth_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -85,28 +71,67 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     size = args.video_size or (256 if args.preset == "quick" else 512)
+    videos = _videos(out, avatar, seq, body, ctx, size, cfg.background, args.motion)
+    times["video_s"] = time.perf_counter() - t0
+
+    editing = edit_stage(out, avatar_path, args.preset, args.seed, body, ctx, videos["camera"], cfg.background,
+                         size)
+    times.update(editing["times_s"])
+    times["total_s"] = time.perf_counter() - t_all
+    _write_summary(out, args, ctx, avatar_path, videos, results, editing, times)
+    return 0
+
+
+def _sequence(seq_dir: Path, seed: int, body, ctx):
+    """The default synthetic sequence: reused when a previous run wrote it whole, else synthesised."""
+    from gma.data import read_sequence
+    from gma.synth.generate import SynthConfig, synthesize
+
+    if (seq_dir / "splits.json").is_file():
+        print(f"[demo] reusing {seq_dir}")
+        return read_sequence(seq_dir)
+    seq = synthesize(seq_dir, SynthConfig(seed=seed), ctx=ctx, body=body)
+    print(f"[demo] synthesised {seq_dir}: {len(seq)} frames at {seq.width}x{seq.height}")
+    return seq
+
+
+def _videos(out: Path, avatar, seq, body, ctx, size: int, background: float, motion_name: str) -> dict:
+    """The turntable, the novel-pose animation and a novel-pose still: their paths, the sequence camera
+    (K, w2c) at ``size`` and the number of surfels drawn."""
+    from gma.avatar.gpu import AvatarRenderer
+    from gma.avatar.posing import frame_params
+    from gma.avatar.video import orbit_cameras, render_turntable, sequence_camera, write_video
+    from gma.body import motion
+    from gma.render.image_io import save_png
+
     renderer = AvatarRenderer(ctx, avatar, body)
     K, w2c = sequence_camera(seq, size)
-    bg = (cfg.background,) * 3
+    bg = (background,) * 3
     canon = body.canonical_params(avatar.shape)
     turntable = write_video(out / "turntable.mp4", render_turntable(renderer, canon, K, w2c, size, 72, bg))
-    mot = motion(args.motion, frames=72, body=body, shape=avatar.shape)
+    mot = motion(motion_name, frames=72, body=body, shape=avatar.shape)
     cam = orbit_cameras(w2c, K, size, size, 1)[0]
     anim = [renderer.render(mot.params(i), cam, bg) for i in range(len(mot))]
-    animation = write_video(out / f"novel_pose_{args.motion}.mp4", anim)
+    animation = write_video(out / f"novel_pose_{motion_name}.mp4", anim)
     # A test_pose frame as a still, for the summary.
     frame = seq.split("test_pose")[0] if seq.split("test_pose") else seq.split("train")[0]
     still = renderer.render(frame_params(seq.body.model, seq.body.frame(frame)), cam, bg)
     save_png(out / "novel_pose_still.png", still)
-    times["video_s"] = time.perf_counter() - t0
+    return {"turntable": turntable, "animation": animation, "camera": (K, w2c),
+            "surfels": len(renderer.decoded.binding)}
 
-    editing = edit_stage(out, avatar_path, args.preset, args.seed, body, ctx, (K, w2c), cfg.background, size)
-    times.update(editing["times_s"])
-    times["total_s"] = time.perf_counter() - t_all
+
+def _write_summary(out: Path, args, ctx, avatar_path: Path, videos: dict, results: dict, editing: dict,
+                   times: dict) -> None:
+    """summary.json (everything) and summary.txt (what to read first), also printed."""
+    from gma.core.atomic import atomic_write_bytes, atomic_write_json
+    from gma.train.trainer import work_dir
 
     fit_metrics = json.loads((work_dir(avatar_path) / "metrics.json").read_text())
-    summary = {"preset": args.preset, "adapter": ctx.name, "sequence": str(seq_dir), "avatar": str(avatar_path),
-               "avatar_mb": round(avatar_path.stat().st_size / 2**20, 2), "surfels": len(renderer.decoded.binding),
+    turntable, animation = videos["turntable"], videos["animation"]
+    summary = {"preset": args.preset, "adapter": ctx.name, "sequence": str(out / "sequence"),
+               "avatar": str(avatar_path),
+               "avatar_mb": round(avatar_path.stat().st_size / 2**20, 2), "surfels": videos["surfels"],
                "fit_steps": fit_metrics["steps"], "fit_resolution": fit_metrics["resolution"],
                "ms_per_step": {k: round(v, 1) for k, v in fit_metrics["ms_per_step"].items()},
                "metrics": results, "times_s": {k: round(v, 1) for k, v in times.items()},
@@ -125,4 +150,3 @@ def run(args: argparse.Namespace) -> int:
     lines.append(f"videos: {turntable}, {animation}, {editing['files'][1]}; total {times['total_s']:.0f} s")
     atomic_write_bytes(out / "summary.txt", ("\n".join(lines) + "\n").encode())
     print("\n".join(lines))
-    return 0

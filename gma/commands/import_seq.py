@@ -196,7 +196,14 @@ def register(subparsers) -> None:
         description=__doc__,
     )
     fmt = p.add_subparsers(dest="format", metavar="FORMAT", required=True)
+    _register_datasets(fmt)
+    _register_video(fmt)
+    _register_motion(fmt)
+    p.set_defaults(func=_run)
 
+
+def _register_datasets(fmt) -> None:
+    """The dataset formats: PeopleSnapshot, X-Humans, ZJU-MoCap."""
     ps = fmt.add_parser("peoplesnapshot", help="PeopleSnapshot in InstantAvatar's layout (SMPL)")
     _common(ps, "subject folder with cameras.npz, images/, masks/, poses.npz")
     _range(ps)
@@ -226,6 +233,8 @@ def register(subparsers) -> None:
     zj.add_argument("--params", default="params", help="parameter folder (params or new_params)")
     zj.add_argument("--smpl-dir", default=None, help="folder with the SMPL model files (or $GMA_SMPL_DIR)")
 
+
+def _register_video(fmt) -> None:
     vd = fmt.add_parser(
         "video", help="a video: masks, camera and Anny body estimated (gma[video]) or supplied by the user",
         description="Without --body, MediaPipe (pip install 'gma[video]') finds the person's mask and "
@@ -257,6 +266,8 @@ def register(subparsers) -> None:
                     "they are checked against the background seen in other frames, for a fixed camera: holes in "
                     "clothing filled, halos over the background removed; a moving camera is detected and skipped)")
 
+
+def _register_motion(fmt) -> None:
     mo = fmt.add_parser(
         "motion", help="a motion for Anny from a BVH, an AMASS / SMPL-X .npz, or a video (gma[video])",
         description="Writes an Anny motion (.npz: local-ref bone transforms, phenotype, fps) that gma render "
@@ -278,4 +289,3 @@ def register(subparsers) -> None:
                          "clip's lowest point (keeps jumps)")
     mo.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
                     help="video: body fit steps per stage")
-    p.set_defaults(func=_run)

@@ -1,13 +1,98 @@
-"""Pinhole cameras in the OpenCV convention (x right, y down, z forward) and their JSON form."""
+"""Pinhole cameras in the OpenCV convention (x right, y down, z forward) and their JSON form.
+
+The JSON form is the sequence format's ``cameras.json``: ``width`` and ``height`` in pixels, intrinsics
+``K`` 3x3 in pixels and world->camera ``w2c`` 4x4, either one camera for all frames or one per frame
+(``K`` [T, 3, 3], ``w2c`` [T, 4, 4]). :func:`parse_camera_json` is its only parser: a sequence's cameras
+(:func:`gma.data.cameras.load_cameras`) and a single ``--camera`` file (:meth:`Camera.load`) follow the
+same rules and give the same messages.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from gma.core.errors import InputError, MissingFileError
+
+__all__ = ["Camera", "look_at_w2c", "parse_camera_json", "projection_matrix", "read_camera_json",
+           "validate_camera_arrays"]
+
+_KEYS = ("width", "height", "K", "w2c")
+
+
+def read_camera_json(path: str | os.PathLike) -> dict:
+    """The JSON object of a camera file (not validated yet: see :func:`parse_camera_json`)."""
+    path = Path(path)
+    if not path.is_file():
+        raise MissingFileError(f"{path}: camera file not found")
+    try:
+        raw = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(raw, dict):
+        raise InputError(f"{path}: expected a JSON object with {', '.join(_KEYS)}")
+    return raw
+
+
+def parse_camera_json(raw: dict, source: str, num_frames: int | None = None
+                      ) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """(width, height, K [T, 3, 3], w2c [T, 4, 4] float64) of a camera JSON object, validated by
+    :func:`validate_camera_arrays`; a single camera comes back with T = 1. ``source`` names the file in
+    the messages (:class:`InputError`)."""
+    if not isinstance(raw, dict):
+        raise InputError(f"{source}: expected a JSON object with {', '.join(_KEYS)}")
+    for key in _KEYS:
+        if key not in raw:
+            raise InputError(f"{source}: missing {key!r}")
+    K = _as_stack(raw["K"], (3, 3), "K", source)
+    w2c = _as_stack(raw["w2c"], (4, 4), "w2c", source)
+    validate_camera_arrays(raw["width"], raw["height"], K, w2c, source, num_frames)
+    return int(raw["width"]), int(raw["height"]), K, w2c
+
+
+def _as_stack(value, shape: tuple[int, int], name: str, source: str) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{source}: {name!r} is not a numeric array ({exc})") from None
+    return a[None] if a.shape == shape else a
+
+
+def validate_camera_arrays(width, height, K: np.ndarray, w2c: np.ndarray, source: str,
+                           num_frames: int | None = None) -> None:
+    """Raise :class:`InputError` naming ``source`` for a size that is not a positive integer, ``K`` /
+    ``w2c`` not [T, 3, 3] / [T, 4, 4], non-finite values, a per-frame count other than 1 or
+    ``num_frames``, focal lengths not positive, wrong last rows, or a ``w2c`` rotation that is not one
+    (a camera-to-world matrix, or a scaled one)."""
+    for name, v in (("width", width), ("height", height)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v <= 0:
+            raise InputError(f"{source}: {name!r} must be a positive integer, got {v!r}")
+    for name, a, shape in (("K", K, (3, 3)), ("w2c", w2c, (4, 4))):
+        if a.ndim != 3 or a.shape[1:] != shape:
+            got = list(a.shape)[1:] if a.ndim == 3 else list(a.shape)
+            raise InputError(f"{source}: {name!r} has shape {got}"
+                             f" per frame, expected {list(shape)} or [T, {shape[0]}, {shape[1]}]")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{source}: {name!r} holds a non-finite value")
+        if num_frames is not None and a.shape[0] not in (1, num_frames):
+            raise InputError(f"{source}: {name!r} has {a.shape[0]} per-frame entries but the sequence has "
+                             f"{num_frames} frames")
+    if np.any(K[:, 0, 0] <= 0) or np.any(K[:, 1, 1] <= 0):
+        raise InputError(f"{source}: 'K' focal lengths must be positive")
+    if not np.allclose(K[:, 2], [0.0, 0.0, 1.0], atol=1e-6):
+        raise InputError(f"{source}: 'K' last row must be [0, 0, 1]")
+    if not np.allclose(w2c[:, 3], [0.0, 0.0, 0.0, 1.0], atol=1e-6):
+        raise InputError(f"{source}: 'w2c' last row must be [0, 0, 0, 1]")
+    r = w2c[:, :3, :3]
+    err = np.abs(r @ np.swapaxes(r, 1, 2) - np.eye(3)).max()
+    if err > 1e-4 or np.any(np.linalg.det(r) < 0):
+        raise InputError(f"{source}: 'w2c' rotation is not a proper rotation (orthonormality error "
+                         f"{err:.2g}); is it camera-to-world, or scaled?")
 
 
 def look_at_w2c(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
@@ -77,31 +162,17 @@ class Camera:
 
     @staticmethod
     def from_json(data: dict, source: str = "camera") -> Camera:
-        """Parse ``{"width", "height", "K": 3x3, "w2c": 4x4}`` (the sequence format's single-camera form)."""
-        try:
-            width, height = int(data["width"]), int(data["height"])
-            K = np.asarray(data["K"], np.float32)
-            view = np.asarray(data.get("w2c", np.eye(4)), np.float32)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"{source}: expected keys width, height, K (3x3) and w2c (4x4): {exc}") from exc
-        if K.shape != (3, 3) or view.shape != (4, 4):
-            raise ValueError(f"{source}: K must be 3x3 and w2c 4x4, got {K.shape} and {view.shape}")
-        if width <= 0 or height <= 0:
-            raise ValueError(f"{source}: width and height must be positive, got {width}x{height}")
-        if not (np.isfinite(K).all() and np.isfinite(view).all()):
-            raise ValueError(f"{source}: K or w2c holds non-finite values")
-        return Camera(view, K, width, height)
+        """One camera from its JSON object (:func:`parse_camera_json`'s rules); a per-frame list is refused."""
+        width, height, K, w2c = parse_camera_json(data, source)
+        if K.shape[0] != 1 or w2c.shape[0] != 1:
+            raise InputError(f"{source}: holds {max(K.shape[0], w2c.shape[0])} per-frame cameras; "
+                             "one camera expected")
+        return Camera(w2c[0].astype(np.float32), K[0].astype(np.float32), width, height)
 
     @staticmethod
-    def load(path: str | Path) -> Camera:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"camera file {path} does not exist")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON ({exc})") from exc
-        return Camera.from_json(data, str(path))
+    def load(path: str | os.PathLike) -> Camera:
+        """One camera from a JSON file (:meth:`from_json`)."""
+        return Camera.from_json(read_camera_json(path), str(path))
 
 
 def projection_matrix(

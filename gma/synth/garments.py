@@ -43,6 +43,26 @@ def _limb_coordinate(v: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.nd
     return ((v - start) @ axis) / (axis @ axis)
 
 
+# Body-part group of a vertex, by the prefix of its dominant bone's name (later rows win; "torso" else).
+_GROUPS = (
+    ("neck", "neck"),
+    ("head", "head"),
+    ("eye", "head"),
+    ("wrist", "hand"),
+    ("finger", "hand"),
+    ("metacarpal", "hand"),
+    ("foot", "foot"),
+    ("toe", "foot"),
+    ("upperleg", "leg"),
+    ("lowerleg", "leg"),
+    ("shoulder", "arm"),
+    ("upperarm", "arm"),
+    ("lowerarm", "arm"),
+    ("root", "hips"),
+    ("pelvis", "hips"),
+)
+
+
 def dress(
     rest: np.ndarray,
     faces: np.ndarray,
@@ -58,28 +78,38 @@ def dress(
     name (needs upperarm01/wrist/upperleg01/foot for both sides, neck01, head). ``sleeve_end`` is where
     the sleeves stop along the arm; ``flare`` scales how loose sleeves and trouser legs get.
     """
-    names = np.array(bone_names)[dominant_bone]
+    names = np.array(bone_names)[dominant_bone].astype(str)
     group = np.full(len(rest), "torso", dtype=object)
-    for prefix, g in (
-        ("neck", "neck"),
-        ("head", "head"),
-        ("eye", "head"),
-        ("wrist", "hand"),
-        ("finger", "hand"),
-        ("metacarpal", "hand"),
-        ("foot", "foot"),
-        ("toe", "foot"),
-        ("upperleg", "leg"),
-        ("lowerleg", "leg"),
-        ("shoulder", "arm"),
-        ("upperarm", "arm"),
-        ("lowerarm", "arm"),
-        ("root", "hips"),
-        ("pelvis", "hips"),
-    ):
-        group[np.char.startswith(names.astype(str), prefix)] = g
-    x, y, z = rest.T
-    left = x > 0
+    for prefix, g in _GROUPS:
+        group[np.char.startswith(names, prefix)] = g
+    arm_s, leg_s = _limb_coordinates(rest, group, joints)
+    neck_z = joints["neck01"][2]
+    hip_z = 0.5 * (joints["upperleg01.L"][2] + joints["upperleg01.R"][2])
+    hem_z = hip_z - 0.05  # the shirt hangs over the trousers' waistband
+    labels = np.full(len(rest), SKIN, np.int64)
+    offsets = np.zeros(len(rest))
+    _clothes(rest[:, 2], group, arm_s, leg_s, hem_z, sleeve_end, flare, labels, offsets)
+    back_y = _collar_and_hood(rest, group, neck_z, labels, offsets)
+    _hair(rest, group, joints, neck_z, labels, offsets)
+
+    face_labels = labels[faces].max(axis=1)
+    landmarks = {
+        "neck_z": neck_z,
+        "head_z": joints["head"][2],
+        "hip_z": hip_z,
+        "hem_z": hem_z,
+        "chest_z": 0.5 * (neck_z + hem_z) + 0.07,
+        "floor_z": float(rest[:, 2].min()),
+        "head_c": joints["head"],
+        "back_y": back_y,
+        "sleeve_end": sleeve_end,
+    }
+    return Garments(labels, face_labels, offsets.astype(np.float32), arm_s, leg_s, landmarks)
+
+
+def _limb_coordinates(rest: np.ndarray, group: np.ndarray, joints: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(arm_s, leg_s) [V]: 0 at the shoulder / hip joint, 1 at the wrist / ankle, -1 off the limb."""
+    left = rest[:, 0] > 0
     arm_s = np.full(len(rest), -1.0)
     leg_s = np.full(len(rest), -1.0)
     for side, mask in (("L", left), ("R", ~left)):
@@ -87,14 +117,11 @@ def dress(
         arm_s[arm] = _limb_coordinate(rest[arm], joints[f"upperarm01.{side}"], joints[f"wrist.{side}"])
         leg = mask & np.isin(group, ["leg", "foot"])
         leg_s[leg] = _limb_coordinate(rest[leg], joints[f"upperleg01.{side}"], joints[f"foot.{side}"])
+    return arm_s, leg_s
 
-    neck_z = joints["neck01"][2]
-    head_z = joints["head"][2]
-    hip_z = 0.5 * (joints["upperleg01.L"][2] + joints["upperleg01.R"][2])
-    hem_z = hip_z - 0.05  # the shirt hangs over the trousers' waistband
-    labels = np.full(len(rest), SKIN, np.int64)
-    offsets = np.zeros(len(rest))
 
+def _clothes(z, group, arm_s, leg_s, hem_z: float, sleeve_end: float, flare: float, labels, offsets) -> None:
+    """Trousers, then the shirt over them, then shoes: labels and offsets written in place."""
     trousers = np.isin(group, ["hips", "leg"]) | ((group == "torso") & (z < hem_z + 0.08))
     trousers &= ~((group == "leg") & (leg_s > 1.02))
     labels[trousers] = TROUSERS
@@ -110,35 +137,29 @@ def dress(
     labels[feet] = SHOES
     offsets[feet] = 0.010
 
+
+def _collar_and_hood(rest, group, neck_z: float, labels, offsets) -> float:
+    """The collar, and a folded hood lying on the upper back (+Y is the back: a soft bump), in place.
+    Returns the back's y (the torso's 90th percentile)."""
+    x, y, z = rest.T
     collar = np.isin(group, ["neck", "torso"]) & (z > neck_z - 0.03) & (z < neck_z + 0.045)
     labels[collar] = COLLAR
     offsets[collar] = 0.018 + 0.006 * _smoothstep(neck_z - 0.03, neck_z + 0.045, z[collar])
 
-    # A folded hood lying on the upper back (+Y is the back): a soft bump.
     back_y = np.percentile(y[group == "torso"], 90)
     hood_c = np.array([0.0, back_y, neck_z - 0.07])
     r2 = (x / 0.13) ** 2 + ((z - hood_c[2]) / 0.075) ** 2
     hood = np.isin(group, ["torso", "neck"]) & (y > hood_c[1] - 0.09) & (r2 < 1.0)
     labels[hood] = HOOD
     offsets[hood] = np.maximum(offsets[hood], 0.012 + 0.045 * (1 - r2[hood]))
+    return back_y
 
-    # Hair: scalp above the forehead, and the back of the head down to the nape.
-    head = group == "head"
+
+def _hair(rest, group, joints: dict, neck_z: float, labels, offsets) -> None:
+    """Hair: scalp above the forehead, and the back of the head down to the nape (in place)."""
+    _, y, z = rest.T
+    head_z = joints["head"][2]
     head_c = joints["head"]
-    scalp = head & ((z > head_z + 0.115) | ((y > head_c[1] + 0.005) & (z > neck_z + 0.04)))
+    scalp = (group == "head") & ((z > head_z + 0.115) | ((y > head_c[1] + 0.005) & (z > neck_z + 0.04)))
     labels[scalp] = HAIR
     offsets[scalp] = 0.008 + 0.014 * _smoothstep(head_z + 0.05, head_z + 0.2, z[scalp])
-
-    face_labels = labels[faces].max(axis=1)
-    landmarks = {
-        "neck_z": neck_z,
-        "head_z": head_z,
-        "hip_z": hip_z,
-        "hem_z": hem_z,
-        "chest_z": 0.5 * (neck_z + hem_z) + 0.07,
-        "floor_z": float(rest[:, 2].min()),
-        "head_c": head_c,
-        "back_y": back_y,
-        "sleeve_end": sleeve_end,
-    }
-    return Garments(labels, face_labels, offsets.astype(np.float32), arm_s, leg_s, landmarks)

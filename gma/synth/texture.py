@@ -116,6 +116,35 @@ def _frac(x):
     return x - np.floor(x)
 
 
+class _Texels:
+    """The covered texels of the atlas at rest: position ``p`` [N, 3] (and its ``x``, ``y``, ``z``), unit
+    normal ``n`` [N, 3], limb coordinates ``arm_s`` / ``leg_s`` [N], garment label ``lab`` and body part
+    label ``body_lab`` [N], and the colour ``col`` [N, 3] being painted (skin to start with)."""
+
+    def __init__(self, look, rest, normals, faces, garments, body_face_labels, fid, bary):
+        cov = fid >= 0
+        f = fid[cov]
+        w = bary[cov][..., None]
+        tri = faces[f]
+        self.p = (rest[tri] * w).sum(1)  # [N, 3] rest position of each covered texel
+        n = (normals[tri] * w).sum(1)
+        self.n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
+        self.arm_s = (garments.arm_s[tri] * w[..., 0]).sum(1)
+        self.leg_s = (garments.leg_s[tri] * w[..., 0]).sum(1)
+        self.lab = garments.face_labels[f]
+        self.body_lab = np.asarray(body_face_labels)[f]
+        self.x, self.y, self.z = self.p.T
+        self.col = np.tile(look.skin, (len(self.p), 1))
+
+    def paint(self, mask, colour, alpha=1.0) -> None:
+        """Blend ``colour`` (one, or one per texel) over the texels of ``mask`` with ``alpha``."""
+        a = np.broadcast_to(np.asarray(alpha, np.float64), mask.shape)[mask][:, None]
+        colour = np.asarray(colour, np.float64)
+        if colour.ndim == 2:  # one colour per texel
+            colour = colour[mask]
+        self.col[mask] = self.col[mask] * (1 - a) + colour * a
+
+
 def bake_texture(
     look: Look,
     rest: np.ndarray,
@@ -130,29 +159,23 @@ def bake_texture(
     """Paint the texture atlas [size, size, 3] uint8 for ``faces``/``face_uvs`` of the rest mesh."""
     fid, bary = rasterize_uv(face_uvs, size)
     cov = fid >= 0
-    f = fid[cov]
-    w = bary[cov][..., None]
-    tri = faces[f]
-    p = (rest[tri] * w).sum(1)  # [N, 3] rest position of each covered texel
-    n = (normals[tri] * w).sum(1)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
-    arm_s = (garments.arm_s[tri] * w[..., 0]).sum(1)
-    leg_s = (garments.leg_s[tri] * w[..., 0]).sum(1)
-    lab = garments.face_labels[f]
-    body_lab = np.asarray(body_face_labels)[f]
-    x, y, z = p.T
+    t = _Texels(look, rest, normals, faces, garments, body_face_labels, fid, bary)
     lm = garments.landmarks
-    col = np.tile(look.skin, (len(p), 1))
+    _paint_skin(t, look, lm, list(body_label_names))
+    _paint_hair(t, look, lm)
+    _paint_top(t, look, lm)
+    _paint_trousers(t, look, lm)
+    _paint_shoes(t, look, lm)
+    tex = np.zeros((size, size, 3), np.float32)
+    tex[cov] = t.col
+    tex = dilate(tex, cov, iterations=6)
+    return np.clip(np.rint(tex * 255), 0, 255).astype(np.uint8)
 
-    def paint(mask, colour, alpha=1.0):
-        a = np.broadcast_to(np.asarray(alpha, np.float64), mask.shape)[mask][:, None]
-        colour = np.asarray(colour, np.float64)
-        if colour.ndim == 2:  # one colour per texel
-            colour = colour[mask]
-        col[mask] = col[mask] * (1 - a) + colour * a
 
-    # Skin: faint blotches, brows, lips, eyes.
-    paint(lab == SKIN, look.skin * 0.9, 0.5 * (_frac(np.sin(x * 91 + z * 57) * 43758.5) > 0.5) * 0.2)
+def _paint_skin(t: _Texels, look: Look, lm: dict, names: list[str]) -> None:
+    """Skin: faint blotches, brows, lips, eyes."""
+    x, z, lab, n = t.x, t.z, t.lab, t.n
+    t.paint(lab == SKIN, look.skin * 0.9, 0.5 * (_frac(np.sin(x * 91 + z * 57) * 43758.5) > 0.5) * 0.2)
     head_c = lm["head_c"]
     front = n[:, 1] < -0.3
     brow = (
@@ -161,32 +184,36 @@ def bake_texture(
         & (np.abs(z - (head_c[2] + 0.105)) < 0.007)
         & (np.abs(np.abs(x) - 0.032) < 0.022)
     )
-    paint(brow, look.hair * 0.8)
+    t.paint(brow, look.hair * 0.8)
     lips = (lab == SKIN) & front & (np.abs(z - (head_c[2] + 0.015)) < 0.008) & (np.abs(x) < 0.024)
-    paint(lips, np.array([0.70, 0.25, 0.28]), 0.8)
-    names = list(body_label_names)
+    t.paint(lips, np.array([0.70, 0.25, 0.28]), 0.8)
     for side in ("L", "R"):
         name = f"eye_front.{side}"
         if name in names:
-            eye = body_lab == names.index(name)
+            eye = t.body_lab == names.index(name)
             if eye.any():
-                c = np.array([np.median(x[eye]), p[eye, 1].min(), np.median(z[eye])])
+                c = np.array([np.median(x[eye]), t.p[eye, 1].min(), np.median(z[eye])])
                 r = np.hypot(x[eye] - c[0], z[eye] - c[2])
-                col[eye] = np.where(
+                t.col[eye] = np.where(
                     (r < 0.0035)[:, None],
                     0.05,
                     np.where((r < 0.0075)[:, None], np.array([0.30, 0.20, 0.10]), 0.95),
                 )
     for name in ("mouth_cavity", "tongue", "eye_cavity.L", "eye_cavity.R"):
         if name in names:
-            paint(body_lab == names.index(name), np.array([0.35, 0.12, 0.12]))
+            t.paint(t.body_lab == names.index(name), np.array([0.35, 0.12, 0.12]))
 
-    # Hair: base colour with fine strands running down the head.
-    hair = lab == HAIR
-    strands = 0.75 + 0.25 * np.sin(np.arctan2(x - head_c[0], y - head_c[1]) * 160 + 3 * np.sin(z * 90))
-    paint(hair, look.hair * strands[:, None])
 
-    # Shirt (and collar, hood): stripes + pinstripes, seams, cuffs, hem, prints.
+def _paint_hair(t: _Texels, look: Look, lm: dict) -> None:
+    """Hair: base colour with fine strands running down the head."""
+    head_c = lm["head_c"]
+    strands = 0.75 + 0.25 * np.sin(np.arctan2(t.x - head_c[0], t.y - head_c[1]) * 160 + 3 * np.sin(t.z * 90))
+    t.paint(t.lab == HAIR, look.hair * strands[:, None])
+
+
+def _paint_top(t: _Texels, look: Look, lm: dict) -> None:
+    """Shirt (and collar, hood): stripes + pinstripes, seams, cuffs, hem, prints."""
+    x, z, lab, n, arm_s, paint = t.x, t.z, t.lab, t.n, t.arm_s, t.paint
     top = np.isin(lab, [SHIRT, COLLAR, HOOD])
     stripes = _frac(z / look.stripe_period) < 0.4
     paint(top, look.shirt)
@@ -216,27 +243,28 @@ def bake_texture(
     a = _sample(num, (0.09 - x) / 0.18, (lm["chest_z"] + 0.0 - z) / 0.09)
     paint(back, look.stripe * 0.4 if look.stripe.sum() > 1.2 else np.array([0.97, 0.97, 0.97]), a)
 
-    # Trousers: a check (tartan-like) pattern, a side stripe, a waistband.
-    pants = lab == TROUSERS
+
+def _paint_trousers(t: _Texels, look: Look, lm: dict) -> None:
+    """Trousers: a check (tartan-like) pattern, a side stripe, a waistband."""
+    x, z, n, paint = t.x, t.z, t.n, t.paint
+    pants = t.lab == TROUSERS
     paint(pants, look.trousers)
     bx = _frac(x / look.check_period) < 0.22
     bz = _frac(z / look.check_period) < 0.22
     paint(pants & (bx | bz), look.check, 0.8)
     paint(pants & bx & bz, look.check * 0.5)
     paint(pants & (_frac((x + z) / 0.006) < 0.3), look.trousers * 0.6, 0.5)
-    outer = pants & (leg_s >= 0) & (np.abs(n[:, 0]) > 0.93) & (np.sign(n[:, 0]) == np.sign(x))
+    outer = pants & (t.leg_s >= 0) & (np.abs(n[:, 0]) > 0.93) & (np.sign(n[:, 0]) == np.sign(x))
     paint(outer, np.array([0.95, 0.95, 0.95]))
     paint(outer & (_frac(z / 0.02) < 0.3), look.check * 0.5)  # dashes along the stripe
     paint(pants & (np.abs(z - (lm["hip_z"] + 0.05)) < 0.018), look.trousers * 0.5)
 
-    # Shoes: white uppers, dark sole, laces on top.
-    shoe = lab == SHOES
-    paint(shoe, look.shoes)
-    paint(shoe & (z < lm["floor_z"] + 0.025), np.array([0.15, 0.15, 0.17]))
-    laces = shoe & (n[:, 2] > 0.55) & (_frac(y / 0.014) < 0.35) & (np.abs(np.abs(x) - np.abs(x).mean()) < 1)
-    paint(laces, look.check * 0.6)
 
-    tex = np.zeros((size, size, 3), np.float32)
-    tex[cov] = col
-    tex = dilate(tex, cov, iterations=6)
-    return np.clip(np.rint(tex * 255), 0, 255).astype(np.uint8)
+def _paint_shoes(t: _Texels, look: Look, lm: dict) -> None:
+    """Shoes: white uppers, dark sole, laces on top."""
+    x = t.x
+    shoe = t.lab == SHOES
+    t.paint(shoe, look.shoes)
+    t.paint(shoe & (t.z < lm["floor_z"] + 0.025), np.array([0.15, 0.15, 0.17]))
+    laces = shoe & (t.n[:, 2] > 0.55) & (_frac(t.y / 0.014) < 0.35) & (np.abs(np.abs(x) - np.abs(x).mean()) < 1)
+    t.paint(laces, look.check * 0.6)

@@ -321,15 +321,6 @@ class Trainer:
             rec["subject"] = subject
         return loss, rec, marks
 
-    def _diverged_message(self, what: str, step: int, stage: Stage, ckpt: Path, saved_step: int | None) -> str:
-        """One line for a fit that diverged (``what``: the loss or the parameters turned NaN or infinite at
-        ``step``, counted from 1): where, and what is kept to resume from. The parameters of that step are
-        not saved; the checkpoint on disk is from before, and a save never writes non-finite values, so it
-        is a good one."""
-        kept = (f"the last good checkpoint (step {saved_step}) is kept in {ckpt} for --resume"
-                if saved_step is not None else "no checkpoint was written yet")
-        return f"{self.out}: the fit diverged: {what} at step {step} ({stage.name}); {kept}"
-
     def _aligns_poses(self) -> bool:
         """Whether the fit runs the pose alignment pass: poses refined, ``--pose.align`` > 0, and a stage 1
         to end (the one-stage ablation has none)."""
@@ -400,36 +391,14 @@ class Trainer:
     def run(self, resume: bool = False) -> Avatar:
         self.dir.mkdir(parents=True, exist_ok=True)
         ckpt = self.dir / CHECKPOINT_NAME
-        cfg_json = self.cfg.to_dict()
         total = sum(s.steps for s in self.stages)
-        step, elapsed = 0, 0.0
-        saved_step = None  # the step of the last checkpoint on disk (None: none yet)
-        opt = None
+        step, elapsed, opt = 0, 0.0, None
         if resume and ckpt.is_file():
-            saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
-            saved = _without_options(saved, OPTIONS_REMOVED)
-            older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and _option_missing(saved, k)}
-            if older and _with_options(saved, older) == _with_options(cfg_json, older):
-                # A fit started before these options existed continues as it began (what they were then).
-                saved = _with_options(saved, older)
-                self.cfg = FitConfig.from_dict(_with_options(self.cfg.to_dict(), older))
-                cfg_json = self.cfg.to_dict()
-                self._attach_poses()  # the bone set may be the older one
-                if self.progress:
-                    print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
-            if saved and saved != cfg_json:
-                raise ValueError(f"{self.dir / 'config.json'}: the checkpoint was made with another config; "
-                                 "resume with the same options, or fit without --resume to start over")
-            opt, meta = load_checkpoint(ckpt, self.net, lambda m: self._optimizer(self.stages[m["stage"]]))
-            step, elapsed, self.history = meta["step"], meta["elapsed"], meta["history"]
-            saved_step = step
-            self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
-            self.align_seconds = meta.get("align_seconds", 0.0)
-            if self.progress:
-                print(f"[gma fit] resuming {ckpt} at step {step}/{total}")
+            opt, step, elapsed = self._resume(ckpt, total)
         elif resume and self.progress:
             print(f"[gma fit] no checkpoint in {self.dir}; starting from step 0")
-        atomic_write_json(self.dir / "config.json", cfg_json)
+        self._saved_step = step if step > 0 else None  # the step of the last checkpoint on disk
+        atomic_write_json(self.dir / "config.json", self.cfg.to_dict())
         self.symmetry = [self._symmetry_prior(sub.frames) for sub in self.subjects]
 
         bar = tqdm(total=total, initial=step, desc="fit", unit="step", disable=not self.progress, dynamic_ncols=True)
@@ -442,26 +411,11 @@ class Trainer:
             stage = self.stages[si]
             if si != stage_idx:
                 stage_idx, opt = si, self._optimizer(stage)
-            frac = local / max(1, stage.steps)
-            for g in opt.param_groups:
-                g["lr"] = g["base_lr"] * self.cfg.lr_decay**frac
-            loss, rec, marks = self._loss(stage, self._frame(step), self.timing, learn_poses=step >= self.pose_start)
-            loss_value = float(loss.detach())
-            if not math.isfinite(loss_value):
+            try:
+                loss_value, rec = self._step(stage, local, step, opt, ckpt)
+            except NonFiniteError:
                 bar.close()
-                raise NonFiniteError(self._diverged_message(f"the loss is {loss_value}", step + 1, stage, ckpt,
-                                                            saved_step))
-            tb = time.perf_counter()
-            loss.backward()
-            tc = time.perf_counter()
-            opt.step()
-            opt.zero_grad(set_to_none=True)
-            td = time.perf_counter()
-            rb = marks.get("render_bwd_done", tc)
-            self.timing["render_bwd"] += rb - tb
-            self.timing["torch_bwd"] += tc - rb
-            self.timing["optimizer"] += td - tc
-            self.timed_steps += 1
+                raise
             step += 1
             if step % self.cfg.log_every == 0 or step == total:
                 self.history.append({"step": step, "stage": stage.name, "loss": loss_value, **rec})
@@ -471,24 +425,92 @@ class Trainer:
             if stage_end and si == 0 and self._aligns_poses():
                 self._align_poses(stage)
             if step % self.cfg.checkpoint_every == 0 or stage_end:
-                meta = {"step": step, "stage": self._locate(step)[0] if step < total else si,
-                        "elapsed": time.perf_counter() - t_start, "history": self.history,
-                        "timing": self.timing, "timed_steps": self.timed_steps, "align_seconds": self.align_seconds}
-                if meta["stage"] != si:  # the next stage starts with a fresh optimiser
-                    opt = self._optimizer(self.stages[meta["stage"]])
-                    stage_idx = meta["stage"]
+                next_stage = self._locate(step)[0] if step < total else si
+                if next_stage != si:  # the next stage starts with a fresh optimiser
+                    opt, stage_idx = self._optimizer(self.stages[next_stage]), next_stage
                 try:
-                    save_checkpoint(ckpt, self.net, opt, meta)
+                    self._checkpoint(ckpt, opt, step, next_stage, time.perf_counter() - t_start)
                 except NonFiniteError as exc:  # a finite loss, but this step's update was not
                     bar.close()
                     raise NonFiniteError(self._diverged_message(f"the parameters are not finite ({exc})", step,
-                                                                stage, ckpt, saved_step)) from None
-                saved_step = step
+                                                                stage, ckpt)) from None
+                self._saved_step = step
             if self.cfg.preview_every and step % self.cfg.preview_every == 0:
                 self._preview(step)
         bar.close()
         fit_seconds = time.perf_counter() - t_start
         self._preview(total)
+        self._save_avatars(fit_seconds, total)
+        self._save_metrics(fit_seconds, total)
+        return self.avatar
+
+    def _resume(self, ckpt: Path, total: int):
+        """Load the checkpoint after checking that it was made with this config (a fit started before an
+        option existed continues as it began). Returns (optimiser, step, elapsed seconds)."""
+        cfg_json = self.cfg.to_dict()
+        saved = json.loads((self.dir / "config.json").read_text()) if (self.dir / "config.json").is_file() else {}
+        saved = _without_options(saved, OPTIONS_REMOVED)
+        older = {k: v for k, v in OPTIONS_ADDED_SINCE.items() if saved and _option_missing(saved, k)}
+        if older and _with_options(saved, older) == _with_options(cfg_json, older):
+            # A fit started before these options existed continues as it began (what they were then).
+            saved = _with_options(saved, older)
+            self.cfg = FitConfig.from_dict(_with_options(self.cfg.to_dict(), older))
+            cfg_json = self.cfg.to_dict()
+            self._attach_poses()  # the bone set may be the older one
+            if self.progress:
+                print(f"[gma fit] this fit started before {', '.join(older)} existed; resuming it with {older}")
+        if saved and saved != cfg_json:
+            raise ValueError(f"{self.dir / 'config.json'}: the checkpoint was made with another config; "
+                             "resume with the same options, or fit without --resume to start over")
+        opt, meta = load_checkpoint(ckpt, self.net, lambda m: self._optimizer(self.stages[m["stage"]]))
+        self.history = meta["history"]
+        self.timing, self.timed_steps = meta["timing"], meta["timed_steps"]
+        self.align_seconds = meta.get("align_seconds", 0.0)
+        if self.progress:
+            print(f"[gma fit] resuming {ckpt} at step {meta['step']}/{total}")
+        return opt, meta["step"], meta["elapsed"]
+
+    def _step(self, stage, local: int, step: int, opt, ckpt: Path):
+        """One optimisation step of ``stage`` (``local`` steps into it) with the learning rate decayed
+        along it; the backward and optimiser times go to ``self.timing``. Returns (loss value, record);
+        raises NonFiniteError, before any update, when the loss is not finite."""
+        frac = local / max(1, stage.steps)
+        for g in opt.param_groups:
+            g["lr"] = g["base_lr"] * self.cfg.lr_decay**frac
+        loss, rec, marks = self._loss(stage, self._frame(step), self.timing, learn_poses=step >= self.pose_start)
+        loss_value = float(loss.detach())
+        if not math.isfinite(loss_value):
+            raise NonFiniteError(self._diverged_message(f"the loss is {loss_value}", step + 1, stage, ckpt))
+        tb = time.perf_counter()
+        loss.backward()
+        tc = time.perf_counter()
+        opt.step()
+        opt.zero_grad(set_to_none=True)
+        td = time.perf_counter()
+        rb = marks.get("render_bwd_done", tc)
+        self.timing["render_bwd"] += rb - tb
+        self.timing["torch_bwd"] += tc - rb
+        self.timing["optimizer"] += td - tc
+        self.timed_steps += 1
+        return loss_value, rec
+
+    def _diverged_message(self, what: str, step: int, stage: Stage, ckpt: Path) -> str:
+        """One line for a fit that diverged (``what``: the loss or the parameters turned NaN or infinite at
+        ``step``, counted from 1): where, and what is kept to resume from. The parameters of that step are
+        not saved; the checkpoint on disk is from before, and a save never writes non-finite values, so it
+        is a good one."""
+        kept = (f"the last good checkpoint (step {self._saved_step}) is kept in {ckpt} for --resume"
+                if self._saved_step is not None else "no checkpoint was written yet")
+        return f"{self.out}: the fit diverged: {what} at step {step} ({stage.name}); {kept}"
+
+    def _checkpoint(self, ckpt: Path, opt, step: int, stage: int, elapsed: float) -> None:
+        """Save the weights, ``opt`` (the optimiser of ``stage``, where the fit continues) and progress."""
+        meta = {"step": step, "stage": stage, "elapsed": elapsed, "history": self.history,
+                "timing": self.timing, "timed_steps": self.timed_steps, "align_seconds": self.align_seconds}
+        save_checkpoint(ckpt, self.net, opt, meta)
+
+    def _save_avatars(self, fit_seconds: float, total: int) -> None:
+        """Each subject's avatar with what its fit was (and its refined poses), and shared decoders."""
         shared = [s.name for s in self.subjects] if len(self.subjects) > 1 else None
         for i, sub in enumerate(self.subjects):
             mine = [h for h in self.history if h.get("subject", 0) == i]
@@ -508,6 +530,10 @@ class Trainer:
         if shared:
             save_decoders(self.out / "decoders.gma", self.model,
                           {"sequences": [str(s.seq.root) for s in self.subjects], "steps": total})
+
+    def _save_metrics(self, fit_seconds: float, total: int) -> None:
+        """metrics.json in the work folder: history, time per step and part, sizes, refinement summaries."""
+        shared = [s.name for s in self.subjects] if len(self.subjects) > 1 else None
         n = max(1, self.timed_steps)
         metrics = {"fit_seconds": fit_seconds, "steps": total, "history": self.history,
                    "ms_per_step": {k: 1000 * v / n for k, v in self.timing.items()},
@@ -529,4 +555,3 @@ class Trainer:
         if unseen:
             metrics["unseen"] = unseen
         atomic_write_json(self.dir / "metrics.json", metrics)
-        return self.avatar

@@ -159,95 +159,122 @@ def fit_body(rig: AnnyRig, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray, ma
     ``CAMERA_FROM_WORLD``, camera at the origin). ``masks`` [T, H, W] enable the silhouette term."""
     cfg = cfg or FitConfig()
     torch.manual_seed(cfg.seed)
-    T = len(tg.found)
-    Kt = torch.as_tensor(K, dtype=torch.float32)
-    R = torch.as_tensor(CAMERA_FROM_WORLD, dtype=torch.float32)
-    tcam = torch.zeros(3)
-    pheno_logit = torch.zeros(6, requires_grad=True)
-    rest = rig.rest(torch.full((6,), 0.5))
-    with torch.no_grad():
-        rv0, tr0 = _initial_root(rig, rest, tg, pose3d, K)
-    n_bones = len(rig.fit_bones) if (cfg.fit_hands and len(rig.fit_bones) > 23) else 23
-    rotvecs = torch.zeros(T, n_bones, 3)
-    rotvecs[:, 0] = torch.as_tensor(rv0, dtype=torch.float32)
-    rotvecs.requires_grad_(True)
-    transl = torch.as_tensor(tr0, dtype=torch.float32).clone().requires_grad_(True)
-    limits = rig.limits[: n_bones - 1]
-    torso = torch.tensor([rig.index(n) for n in _TORSO])
-    pair_w = torch.tensor(BONE_PAIR_WEIGHTS)
-    sil = None
-    if masks is not None and cfg.iters_shape > 0 and cfg.w_sil > 0:
-        sil = SilhouetteRenderer(rig.body.faces, size=cfg.sil_size, seed=cfg.seed)
-        boxes = [crop_box(m) if tg.found[t] else None for t, m in enumerate(masks)]
-        sil_frames = [t for t, b in enumerate(boxes) if b is not None]
-        targets = {t: sil.target(masks[t], boxes[t]) for t in sil_frames}
-    w2c = torch.eye(4)
-    w2c[:3, :3] = R
-    g = torch.Generator().manual_seed(cfg.seed)
-    losses: dict[str, float] = {}
-
-    def energy(stage: int) -> tuple[torch.Tensor, dict[str, float]]:
-        nonlocal rest
-        if stage == 3 and cfg.fit_shape:
-            rest = rig.rest(torch.sigmoid(pheno_logit))
-        pose = rig.pose_matrices(rotvecs, transl)
-        tr = rig.transforms(pose, rest)
-        pts = rig.points(tr, rest)                                         # [T, P, 3]
-        uv = project(pts, Kt, R, tcam)
-        conf = tg.conf if stage > 1 else tg.conf * torch.isin(torch.arange(pts.shape[1]), torso)
-        err = (uv - tg.uv).norm(dim=-1) / tg.scale[:, None]
-        e2d = (conf * (torch.sqrt(err**2 + 1e-4) - 1e-2)).sum() / conf.sum().clamp_min(1e-6)
-        terms = {"2d": cfg.w_2d * e2d}
-        if stage > 1:
-            cam = pts @ R.T
-            d = cam[:, tg.pair_idx[:, 1]] - cam[:, tg.pair_idx[:, 0]]
-            cos = (d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6) * tg.dirs3d).sum(-1)
-            terms["3d"] = cfg.w_3d * (tg.conf3d * pair_w * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6)
-            ang = rotvecs[:, 1:].norm(dim=-1)
-            terms["limit"] = cfg.w_limit * torch.relu(ang - limits).pow(2).sum(-1).mean()
-            terms["prior"] = cfg.w_prior * ang.pow(2).sum(-1).mean()
-        if T > 1:
-            terms["smooth"] = cfg.w_smooth * ((pts[1:] - pts[:-1]).pow(2).sum(-1).mean()
-                                              + (transl[1:] - transl[:-1]).pow(2).sum(-1).mean())
-        if stage == 3:
-            terms["shape"] = cfg.w_shape * (torch.sigmoid(pheno_logit) - 0.5).pow(2).sum()
-            if sil is not None and sil_frames:
-                pick = torch.randperm(len(sil_frames), generator=g)[: cfg.sil_frames]
-                verts = rig.vertices(tr[[sil_frames[i] for i in pick]], rest)
-                e = 0
-                for k, i in enumerate(pick):
-                    t = sil_frames[i]
-                    a = sil.render(verts[k], Kt, w2c, boxes[t])
-                    e = e + (a - targets[t]).pow(2).mean()
-                terms["sil"] = cfg.w_sil * e / len(pick)
-        total = sum(terms.values())
-        return total, {k: float(v.detach()) for k, v in terms.items()}
-
-    # Stage 3 sees the silhouette of only a few frames per step; at the full step size Adam would
-    # jolt exactly those frames' poses each time, so poses move 5× slower there than the phenotype.
-    poses = [{"params": [rotvecs, transl]}]
-    stages = [(1, cfg.iters_root, poses), (2, cfg.iters_pose, poses),
-              (3, cfg.iters_shape, [{"params": [rotvecs, transl], "lr": cfg.lr * 0.2}]
-               + ([{"params": [pheno_logit]}] if cfg.fit_shape else []))]
+    fit = _BodyFit(rig, tg, pose3d, K, masks, cfg)
+    stages = fit.stages()
     bar = tqdm(total=sum(s[1] for s in stages), desc="fit", unit="step", leave=False, disable=not progress)
+    losses: dict[str, float] = {}
     for stage, iters, params in stages:
         if iters <= 0:
             continue
         opt = torch.optim.Adam(params, lr=cfg.lr)
         for _ in range(iters):
             opt.zero_grad()
-            loss, losses = energy(stage)
+            loss, losses = fit.energy(stage)
             loss.backward()
             if stage == 1:  # only the root moves in stage 1
-                rotvecs.grad[:, 1:] = 0
+                fit.rotvecs.grad[:, 1:] = 0
             opt.step()
             bar.update(1)
             bar.set_postfix(stage=stage, loss=f"{float(loss.detach()):.4f}")
     bar.close()
-    with torch.no_grad():
-        pheno = torch.sigmoid(pheno_logit) if cfg.fit_shape else torch.full((6,), 0.5)
-        rest = rig.rest(pheno)
-        pose = rig.pose_matrices(rotvecs, transl)
-        pts = rig.points(rig.transforms(pose, rest), rest)
-        uv = project(pts, Kt, R, tcam)
-    return FitResult(pose.numpy(), pheno.numpy(), pts.numpy(), uv.numpy(), losses)
+    return fit.result(losses)
+
+
+class _BodyFit:
+    """The variables of one body fit (root and bone rotations, translations, phenotype logits) and its
+    energy: 2D landmarks from stage 1 (torso only there), 3D directions, joint limits and a pose prior
+    from stage 2, phenotype and silhouette in stage 3; smoothness over time throughout."""
+
+    def __init__(self, rig: AnnyRig, tg: FitTargets, pose3d: np.ndarray, K: np.ndarray,
+                 masks: np.ndarray | None, cfg: FitConfig):
+        self.rig, self.tg, self.cfg = rig, tg, cfg
+        self.T = len(tg.found)
+        self.Kt = torch.as_tensor(K, dtype=torch.float32)
+        self.R = torch.as_tensor(CAMERA_FROM_WORLD, dtype=torch.float32)
+        self.tcam = torch.zeros(3)
+        self.pheno_logit = torch.zeros(6, requires_grad=True)
+        self.rest = rig.rest(torch.full((6,), 0.5))
+        with torch.no_grad():
+            rv0, tr0 = _initial_root(rig, self.rest, tg, pose3d, K)
+        n_bones = len(rig.fit_bones) if (cfg.fit_hands and len(rig.fit_bones) > 23) else 23
+        self.rotvecs = torch.zeros(self.T, n_bones, 3)
+        self.rotvecs[:, 0] = torch.as_tensor(rv0, dtype=torch.float32)
+        self.rotvecs.requires_grad_(True)
+        self.transl = torch.as_tensor(tr0, dtype=torch.float32).clone().requires_grad_(True)
+        self.limits = rig.limits[: n_bones - 1]
+        self.torso = torch.tensor([rig.index(n) for n in _TORSO])
+        self.pair_w = torch.tensor(BONE_PAIR_WEIGHTS)
+        self.sil = None
+        if masks is not None and cfg.iters_shape > 0 and cfg.w_sil > 0:
+            self.sil = SilhouetteRenderer(rig.body.faces, size=cfg.sil_size, seed=cfg.seed)
+            self.boxes = [crop_box(m) if tg.found[t] else None for t, m in enumerate(masks)]
+            self.sil_frames = [t for t, b in enumerate(self.boxes) if b is not None]
+            self.targets = {t: self.sil.target(masks[t], self.boxes[t]) for t in self.sil_frames}
+        self.w2c = torch.eye(4)
+        self.w2c[:3, :3] = self.R
+        self.g = torch.Generator().manual_seed(cfg.seed)
+
+    def stages(self) -> list[tuple[int, int, list[dict]]]:
+        """(stage, steps, Adam parameter groups) of the three stages."""
+        cfg = self.cfg
+        # Stage 3 sees the silhouette of only a few frames per step; at the full step size Adam would
+        # jolt exactly those frames' poses each time, so poses move 5× slower there than the phenotype.
+        poses = [{"params": [self.rotvecs, self.transl]}]
+        return [(1, cfg.iters_root, poses), (2, cfg.iters_pose, poses),
+                (3, cfg.iters_shape, [{"params": [self.rotvecs, self.transl], "lr": cfg.lr * 0.2}]
+                 + ([{"params": [self.pheno_logit]}] if cfg.fit_shape else []))]
+
+    def energy(self, stage: int) -> tuple[torch.Tensor, dict[str, float]]:
+        cfg, tg = self.cfg, self.tg
+        if stage == 3 and cfg.fit_shape:
+            self.rest = self.rig.rest(torch.sigmoid(self.pheno_logit))
+        pose = self.rig.pose_matrices(self.rotvecs, self.transl)
+        tr = self.rig.transforms(pose, self.rest)
+        pts = self.rig.points(tr, self.rest)                              # [T, P, 3]
+        uv = project(pts, self.Kt, self.R, self.tcam)
+        conf = tg.conf if stage > 1 else tg.conf * torch.isin(torch.arange(pts.shape[1]), self.torso)
+        err = (uv - tg.uv).norm(dim=-1) / tg.scale[:, None]
+        e2d = (conf * (torch.sqrt(err**2 + 1e-4) - 1e-2)).sum() / conf.sum().clamp_min(1e-6)
+        terms = {"2d": cfg.w_2d * e2d}
+        if stage > 1:
+            terms.update(self._pose_terms(pts))
+        if self.T > 1:
+            terms["smooth"] = cfg.w_smooth * ((pts[1:] - pts[:-1]).pow(2).sum(-1).mean()
+                                              + (self.transl[1:] - self.transl[:-1]).pow(2).sum(-1).mean())
+        if stage == 3:
+            terms["shape"] = cfg.w_shape * (torch.sigmoid(self.pheno_logit) - 0.5).pow(2).sum()
+            if self.sil is not None and self.sil_frames:
+                terms["sil"] = cfg.w_sil * self._silhouette(tr)
+        total = sum(terms.values())
+        return total, {k: float(v.detach()) for k, v in terms.items()}
+
+    def _pose_terms(self, pts: torch.Tensor) -> dict[str, torch.Tensor]:
+        """3D bone directions against the landmarks', joint limits and the pose prior."""
+        cfg, tg = self.cfg, self.tg
+        cam = pts @ self.R.T
+        d = cam[:, tg.pair_idx[:, 1]] - cam[:, tg.pair_idx[:, 0]]
+        cos = (d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6) * tg.dirs3d).sum(-1)
+        ang = self.rotvecs[:, 1:].norm(dim=-1)
+        return {"3d": cfg.w_3d * (tg.conf3d * self.pair_w * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6),
+                "limit": cfg.w_limit * torch.relu(ang - self.limits).pow(2).sum(-1).mean(),
+                "prior": cfg.w_prior * ang.pow(2).sum(-1).mean()}
+
+    def _silhouette(self, tr: torch.Tensor) -> torch.Tensor:
+        """Mean squared silhouette error over a few random frames (``cfg.sil_frames``)."""
+        pick = torch.randperm(len(self.sil_frames), generator=self.g)[: self.cfg.sil_frames]
+        verts = self.rig.vertices(tr[[self.sil_frames[i] for i in pick]], self.rest)
+        e = 0
+        for k, i in enumerate(pick):
+            t = self.sil_frames[i]
+            a = self.sil.render(verts[k], self.Kt, self.w2c, self.boxes[t])
+            e = e + (a - self.targets[t]).pow(2).mean()
+        return e / len(pick)
+
+    def result(self, losses: dict[str, float]) -> FitResult:
+        with torch.no_grad():
+            pheno = torch.sigmoid(self.pheno_logit) if self.cfg.fit_shape else torch.full((6,), 0.5)
+            rest = self.rig.rest(pheno)
+            pose = self.rig.pose_matrices(self.rotvecs, self.transl)
+            pts = self.rig.points(self.rig.transforms(pose, rest), rest)
+            uv = project(pts, self.Kt, self.R, self.tcam)
+        return FitResult(pose.numpy(), pheno.numpy(), pts.numpy(), uv.numpy(), losses)

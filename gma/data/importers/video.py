@@ -194,7 +194,15 @@ def import_video(
     if n == 0:
         raise ValueError(f"{src}: the video has no frames")
     idx = frame_range(n, start, end, skip)
+    mask_files = _check_masks(src, n, mask_video, mask_dir)
+    params = _body_of_frames(body, model_dir, src, n, idx)
+    cams = _cameras_of_frames(camera, n, idx)
+    frames = _frames(src, set(idx), alpha, mask_video, mask_files)
+    return write_imported(out, frames, len(idx), cams, params, None, downscale, overwrite, "video")
 
+
+def _check_masks(src: Path, n: int, mask_video, mask_dir) -> list[Path] | None:
+    """The mask folder's images (one per video frame), or None; a mask video must have ``n`` frames too."""
     mask_files = None
     if mask_dir is not None:
         mask_files = sorted(p for p in Path(mask_dir).glob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
@@ -206,7 +214,11 @@ def import_video(
         m = count_frames(mask_video)
         if m != n:
             raise ValueError(f"{mask_video}: {m} frames, but {src} has {n}")
+    return mask_files
 
+
+def _body_of_frames(body, model_dir, src: Path, n: int, idx: list[int]):
+    """The body parameters of the selected frames ``idx`` (given for all ``n`` frames or for those)."""
     params = load_body(body)
     require_body_model(params, str(body), model_dir)
     if params.num_frames == n and len(idx) != n:
@@ -216,6 +228,12 @@ def import_video(
             f"{body}: {params.num_frames} frames of body parameters, but {src} has {n} frames "
             f"({len(idx)} selected)"
         )
+    return params
+
+
+def _cameras_of_frames(camera, n: int, idx: list[int]):
+    """The cameras of the selected frames ``idx``: one static camera, or per-frame ones given for all
+    ``n`` frames or for those."""
     cams = load_cameras(camera)
     if not cams.static:
         if cams.K.shape[0] == n or cams.w2c.shape[0] == n:
@@ -225,34 +243,34 @@ def import_video(
             raise ValueError(
                 f"{camera}: per-frame cameras do not match {n} video frames ({len(idx)} selected)"
             )
+    return cams
 
-    wanted = set(idx)
 
-    def frames():
-        # Both decoders close (ending their ffmpeg processes) when this generator stops, also on an error:
-        # an exception's traceback would otherwise keep them running as long as it is kept.
-        with ExitStack() as stack:
-            masks = stack.enter_context(closing(read_frames(mask_video, False))) if mask_video is not None else None
-            video = stack.enter_context(closing(read_frames(src, alpha)))
-            yield from selected(video, masks)
+def _frames(src: Path, wanted: set[int], alpha: bool, mask_video, mask_files):
+    """(RGB image, mask) of the ``wanted`` frames. Both decoders close (ending their ffmpeg processes)
+    when this generator stops, also on an error: an exception's traceback would otherwise keep them
+    running as long as it is kept."""
+    with ExitStack() as stack:
+        masks = stack.enter_context(closing(read_frames(mask_video, False))) if mask_video is not None else None
+        video = stack.enter_context(closing(read_frames(src, alpha)))
+        yield from _selected(src, video, masks, wanted, alpha, mask_video, mask_files)
 
-    def selected(video, masks):
-        for i, img in enumerate(video):
-            m = next(masks) if masks is not None else None
-            if i not in wanted:
-                continue
-            if alpha:
-                if img.shape[2] != 4:
-                    raise ValueError(f"{src}: the decoder returned no alpha channel")
-                mask = img[..., 3].astype(np.float32) / 255.0
-                if mask.min() == 1.0:
-                    raise ValueError(
-                        f"{src}: frame {i} alpha is fully opaque; this video has no usable alpha"
-                    )
-            elif m is not None:
-                mask = mask_from_array(m, mask_video)
-            else:
-                mask = mask_from_array(iio.imread(mask_files[i]), mask_files[i])
-            yield np.ascontiguousarray(img[..., :3]), mask
 
-    return write_imported(out, frames(), len(idx), cams, params, None, downscale, overwrite, "video")
+def _selected(src: Path, video, masks, wanted: set[int], alpha: bool, mask_video, mask_files):
+    for i, img in enumerate(video):
+        m = next(masks) if masks is not None else None
+        if i not in wanted:
+            continue
+        if alpha:
+            if img.shape[2] != 4:
+                raise ValueError(f"{src}: the decoder returned no alpha channel")
+            mask = img[..., 3].astype(np.float32) / 255.0
+            if mask.min() == 1.0:
+                raise ValueError(
+                    f"{src}: frame {i} alpha is fully opaque; this video has no usable alpha"
+                )
+        elif m is not None:
+            mask = mask_from_array(m, mask_video)
+        else:
+            mask = mask_from_array(iio.imread(mask_files[i]), mask_files[i])
+        yield np.ascontiguousarray(img[..., :3]), mask

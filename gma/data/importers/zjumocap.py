@@ -110,16 +110,8 @@ def import_zjumocap(
     annots = load_npy_safely(src / "annots.npy")
     if not isinstance(annots, dict) or "cams" not in annots or "ims" not in annots:
         raise ValueError(f"{src / 'annots.npy'}: expected a dict with 'cams' and 'ims'")
-    cams_raw = annots["cams"]
-    Ks, Rs, Ts = (np.asarray(cams_raw[k], np.float64) for k in ("K", "R", "T"))
+    Ks, w2c = _cameras(annots["cams"], src / "annots.npy")
     n_views = len(Ks)
-    if Rs.shape != (n_views, 3, 3) or Ts.reshape(n_views, -1).shape[1] != 3:
-        raise ValueError(
-            f"{src / 'annots.npy'}: cams R/T shapes {Rs.shape}/{Ts.shape} do not fit {n_views} views"
-        )
-    w2c = np.tile(np.eye(4), (n_views, 1, 1))
-    w2c[:, :3, :3] = Rs
-    w2c[:, :3, 3] = Ts.reshape(n_views, 3) / 1000.0  # millimetres -> metres
     if not 0 <= view < n_views:
         raise ValueError(f"view {view} out of range: {src / 'annots.npy'} has {n_views} cameras")
     if test_views is None:
@@ -136,27 +128,10 @@ def import_zjumocap(
     mask_root = src / "mask" if (src / "mask").is_dir() else src / "mask_cihp"
     rows, K_list, w_list, paths, splits = [], [], [], [], {}
     for k, (f, v, split) in enumerate(picks):
-        rel = ims[f]["ims"][v]
-        img_path = src / rel
-        if not img_path.is_file():
-            raise FileNotFoundError(f"{img_path}: image listed in annots.npy is missing")
-        mask_path = (mask_root / rel).with_suffix(".png")
-        if not mask_path.is_file():
-            raise FileNotFoundError(f"{mask_path}: mask for {rel} is missing")
-        p = _load_params(src, params_dir, f)
-        R_h = _rotvec_to_matrix(p["Rh"])
-        j0 = smpl_root_joint(smpl, p["shapes"])
-        rows.append(
-            {
-                "global_orient": _matrix_to_rotvec(R_h @ _rotvec_to_matrix(p["poses"][:3])),
-                "body_pose": p["poses"][3:],
-                "transl": p["Th"] + R_h @ j0 - j0,
-                "betas": p["shapes"],
-            }
-        )
+        paths.append(_frame_files(src, mask_root, ims[f]["ims"][v]))
+        rows.append(_smpl_row(smpl, _load_params(src, params_dir, f)))
         K_list.append(Ks[v])
         w_list.append(w2c[v])
-        paths.append((img_path, mask_path))
         splits.setdefault(split, []).append(k)
     body = SequenceBody(
         "smpl",
@@ -175,3 +150,39 @@ def import_zjumocap(
             yield read_rgb(img_path), ((m[..., 0] if m.ndim == 3 else m) > 0).astype(np.float32)
 
     return write_imported(out, frames(), len(paths), cams, body, splits, downscale, overwrite, "ZJU-MoCap")
+
+
+def _cameras(cams_raw: dict, source: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(K [V, 3, 3], w2c [V, 4, 4] in metres) of annots.npy's cameras (R, T in millimetres)."""
+    Ks, Rs, Ts = (np.asarray(cams_raw[k], np.float64) for k in ("K", "R", "T"))
+    n_views = len(Ks)
+    if Rs.shape != (n_views, 3, 3) or Ts.reshape(n_views, -1).shape[1] != 3:
+        raise ValueError(f"{source}: cams R/T shapes {Rs.shape}/{Ts.shape} do not fit {n_views} views")
+    w2c = np.tile(np.eye(4), (n_views, 1, 1))
+    w2c[:, :3, :3] = Rs
+    w2c[:, :3, 3] = Ts.reshape(n_views, 3) / 1000.0  # millimetres -> metres
+    return Ks, w2c
+
+
+def _frame_files(src: Path, mask_root: Path, rel: str) -> tuple[Path, Path]:
+    """(image, mask) of one listed image; a missing one is named."""
+    img_path = src / rel
+    if not img_path.is_file():
+        raise FileNotFoundError(f"{img_path}: image listed in annots.npy is missing")
+    mask_path = (mask_root / rel).with_suffix(".png")
+    if not mask_path.is_file():
+        raise FileNotFoundError(f"{mask_path}: mask for {rel} is missing")
+    return img_path, mask_path
+
+
+def _smpl_row(smpl, p: dict) -> dict:
+    """One frame's SMPL parameters in the sequence format: ZJU-MoCap's extra rotation Rh and translation
+    Th (about the origin) folded into the global orientation and a translation about the root joint."""
+    R_h = _rotvec_to_matrix(p["Rh"])
+    j0 = smpl_root_joint(smpl, p["shapes"])
+    return {
+        "global_orient": _matrix_to_rotvec(R_h @ _rotvec_to_matrix(p["poses"][:3])),
+        "body_pose": p["poses"][3:],
+        "transl": p["Th"] + R_h @ j0 - j0,
+        "betas": p["shapes"],
+    }
