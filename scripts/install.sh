@@ -60,7 +60,7 @@ if [ "${LAVAPIPE:-system}" = backports ]; then
     fi
 elif grep -qsE '^VERSION_CODENAME="?(bookworm|trixie)' /etc/os-release \
         && [ ! -e "${XDG_DATA_HOME:-$HOME/.local/share}/vulkan/icd.d/gma_lavapipe_backport.json" ]; then
-    echo "[install] renders faster on lavapipe with the backports' Mesa: make install LAVAPIPE=backports (README, Environment)"
+    echo "[install] renders faster on lavapipe with the backports' Mesa: make install LAVAPIPE=backports (README, Settings)"
 fi
 
 # --- Web export (gma export avatar.gma page.html) -------------------------------------------------------------
