@@ -446,19 +446,24 @@ class SurfelRasterizer:
                              *(replayed or (None, None)), records=records,
                              host_images=_images_from(host, camera, c) if read_images else None,
                              texel_lease=lease)
-        if lease is not None:   # the backward binds them; later renders get them once the state is gone
+        self._hand_back_with(state, lease, [*st.kept, isect_ids, ranges, *([] if in_place else images), *replayed]
+                             if replay else None)
+        return state
+
+    def _hand_back_with(self, state: ForwardState, lease, kept: list | None) -> None:
+        """When ``state`` is gone, give back its surfel texels' ``lease`` (the backward binds them) and, for
+        a replayable render, its ``kept`` buffers and records: they serve later renders (a training loop
+        then allocates nothing; see gma/gpu/recycle.py). Each is written in full before it is read:
+        projection writes every surfel's tile count, and the rest is read only where tile counts, lists
+        and ranges point, which that render wrote."""
+        if lease is not None:
             done = weakref.finalize(state, self.texels.give_back, lease)
             done.atexit = False
-        if replay:
-            # Its buffers serve later renders once the state is gone (a training loop then allocates
-            # nothing; see gma/gpu/recycle.py). Each is written in full before it is read: projection
-            # writes every surfel's tile count, and the rest is read only where tile counts, lists and
-            # ranges point, which this render wrote.
-            kept = [*st.kept, isect_ids, ranges, *([] if in_place else images), *replayed]
+        if kept is not None:
+            records = state.records
             if records:
                 kept += [records.isect_keys, records.record_base, records.used_blocks]
-            ctx.recycler.release_with(state, kept)
-        return state
+            self.ctx.recycler.release_with(state, kept)
 
     def _packed_images(self, hw: int, c: int) -> PackedBuffer:
         """A mappable buffer for a render's counts (16 bytes, range 0) and its four images (ranges 1-4)."""
@@ -510,18 +515,7 @@ class SurfelRasterizer:
         # gradients are uploaded in full and project_bwd writes every surfel's gradients. Accumulators
         # (the atomics' v_proj and v_colors) and a missing upstream's zeros are not recycled.
         take, recycled = ctx.recycler.take, []
-        upstream = {}
-        for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
-                                              (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
-            if (binding >= 10 and not normal_depth) or (binding == 9 and arr is None):
-                continue
-            if arr is None:
-                upstream[binding] = self._zeros(4 * hw * per_pixel)
-            else:
-                data = np.ascontiguousarray(arr, np.float32).reshape(-1)
-                upstream[binding] = take(data.nbytes, name, STORAGE)
-                ctx.write(upstream[binding], data)
-                recycled.append(upstream[binding])
+        upstream = self._upload_upstream(v_color, v_alpha, v_normal, v_depth, c, hw, normal_depth, recycled)
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
         defines = self.backward_defines(c)
@@ -562,22 +556,8 @@ class SurfelRasterizer:
             recycled.append(v_colors)
         else:
             v_colors = ctx.buffer(4 * c * n, "v_colors")
-        if records:
-            # Scratch (the gradients are read back before this returns). Only records that the slots
-            # point to are read, all written by this pass: no clearing; the slots are cleared.
-            if use_record_texels:
-                resources[23] = grads = self.texels.view("records", record_bytes // 16)
-            else:
-                resources[12] = grads = self.workspace.get("grad_records", record_bytes)
-            slot_bytes = 4 * max(state.num_isects, 1)
-            slots = self.workspace.get("record_slots", slot_bytes)
-            enc.clear_buffer(slots, 0, slot_bytes)
-            resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks, 22: slots})
-        else:
-            grads = ctx.buffer(4 * 16 * n, "v_proj")
-            resources[12] = grads
-            if not colors_out:
-                resources[13] = v_colors
+        grads, slots = self._bind_gradient_sums(enc, resources, state, record_bytes, use_record_texels,
+                                                None if colors_out else v_colors)
         if defines["USE_SUBGROUPS"]:
             self._subgroup_inputs(resources, state.proj.colors4)
         if texels and state.texel_lease is not None:   # the forward's copies, as they are
@@ -594,35 +574,94 @@ class SurfelRasterizer:
             outs = [take(size, name, STORAGE) for name, size in zip(("v_means", "v_quats", "v_scales", "v_opacities"),
                                                                      grad_sizes)]
             recycled += outs
-        proj_resources = dict(enumerate([state.proj.params, surfels.means, surfels.quats, surfels.scales,
-                                         state.proj.tile_counts, grads, *outs]))
-        if colors_out:
-            proj_resources[10] = v_colors
-        if records:
-            proj_resources[11] = records.record_base
-            proj_resources[12] = slots
-        if use_record_texels:
-            del proj_resources[5]
-            proj_resources[13] = grads
         proj_defines = {"COLOR_IN_PROJ": color_in_proj, "GRAD_RECORDS": records is not None,
                         "RECORD_TEXELS": use_record_texels, "NORMAL_DEPTH_GRADS": normal_depth,
                         "COLORS_OUT": colors_out, "CHANNELS": c}
+        links = {"grads": grads, "v_colors": v_colors if colors_out else None, "records": records,
+                 "slots": slots, "record_texels": use_record_texels}
+        self._project_backward(enc, state, surfels, outs, links, proj_defines, timer)
+        ctx.submit(enc)
+        grads_out = self._read_gradients(packed if in_place else None, [*outs, v_colors], n, c)
+        ctx.recycler.give_back(recycled)  # read back: nothing else holds them
+        return grads_out
+
+    def _bind_gradient_sums(self, enc, resources: dict, state: ForwardState, record_bytes: int,
+                            use_record_texels: bool, atomic_colors) -> tuple:
+        """Bind where the backward rasterizer puts its per-surfel sums: the records and their slots (the
+        records variant), or a zero-filled v_proj for the atomics, plus ``atomic_colors`` (the colour
+        gradients the atomics add into, when project_bwd does not write them). Returns (sums, slots)."""
+        records = state.records
+        if not records:
+            grads = self.ctx.buffer(4 * 16 * state.num_surfels, "v_proj")
+            resources[12] = grads
+            if atomic_colors is not None:
+                resources[13] = atomic_colors
+            return grads, None
+        # Scratch (the gradients are read back before the backward returns). Only records that the slots
+        # point to are read, all written by this pass: no clearing; the slots are cleared.
+        if use_record_texels:
+            resources[23] = grads = self.texels.view("records", record_bytes // 16)
+        else:
+            resources[12] = grads = self.workspace.get("grad_records", record_bytes)
+        slot_bytes = 4 * max(state.num_isects, 1)
+        slots = self.workspace.get("record_slots", slot_bytes)
+        enc.clear_buffer(slots, 0, slot_bytes)
+        resources.update({16: records.isect_keys, 17: records.record_base, 19: records.used_blocks, 22: slots})
+        return grads, slots
+
+    def _read_gradients(self, packed, buffers: list, n: int, c: int) -> SurfelGrads:
+        """The gradients of means, quats, scales, opacities and colours: the mappings of ``packed`` (reads
+        in place) or a copy of ``buffers``."""
+        if packed is not None:
+            means, quats, scales, opacities, colors = (a.view(np.float32) for a in self.ctx.read_in_place(packed))
+        else:
+            means, quats, scales, opacities, colors = self.ctx.read_many(
+                [(b, np.float32, k * n) for b, k in zip(buffers, (3, 4, 2, 1, c), strict=True)])
+        return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
+                           colors.reshape(n, c))
+
+    def _upload_upstream(self, v_color, v_alpha, v_normal, v_depth, c: int, hw: int, normal_depth: bool,
+                         recycled: list) -> dict:
+        """The upstream image gradients as buffers by binding. A missing one that the variant still reads
+        is a shared zero buffer; without a loss on the normal and depth images (or on alpha) the variant
+        reads none, and nothing is bound. Uploaded buffers are appended to ``recycled``."""
+        upstream = {}
+        for binding, name, arr, per_pixel in ((8, "v_color", v_color, c), (9, "v_alpha", v_alpha, 1),
+                                              (10, "v_normal", v_normal, 3), (11, "v_depth", v_depth, 1)):
+            if (binding >= 10 and not normal_depth) or (binding == 9 and arr is None):
+                continue
+            if arr is None:
+                upstream[binding] = self._zeros(4 * hw * per_pixel)
+            else:
+                data = np.ascontiguousarray(arr, np.float32).reshape(-1)
+                upstream[binding] = self.ctx.recycler.take(data.nbytes, name, STORAGE)
+                self.ctx.write(upstream[binding], data)
+                recycled.append(upstream[binding])
+        return upstream
+
+    def _project_backward(self, enc, state: ForwardState, surfels: SurfelBuffers, outs: list, links: dict,
+                          proj_defines: dict, timer) -> None:
+        """Record project_bwd: from the rasterizer's per-surfel sums (``links["grads"]``: v_proj, or the
+        records with their slots) to the gradients of means, quats, scales and opacities (``outs``) and,
+        when ``links["v_colors"]`` is given, the colours; ends the encoder's timing."""
+        n = state.num_surfels
+        proj_resources = dict(enumerate([state.proj.params, surfels.means, surfels.quats, surfels.scales,
+                                         state.proj.tile_counts, links["grads"], *outs]))
+        if links["v_colors"] is not None:
+            proj_resources[10] = links["v_colors"]
+        if links["records"]:
+            proj_resources[11] = links["records"].record_base
+            proj_resources[12] = links["slots"]
+        if links["record_texels"]:
+            del proj_resources[5]
+            proj_resources[13] = links["grads"]
         proj_defines["WORK_QUEUE"] = queued = self.options.work_queues and self.ctx.has_subgroups
-        proj = ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out or queued else None)
+        colors_out = links["v_colors"] is not None
+        proj = self.ctx.compute_pipeline("render/project_bwd.wgsl", proj_defines if colors_out or queued else None)
         groups = self._groups(enc, proj_resources, queued, 14, ((n + 255) // 256, 1, 1))
         self._dispatch(enc, proj, proj_resources, groups, "project_bwd", timer)
         if timer:
             timer.resolve(enc)
-        ctx.submit(enc)
-        if in_place:
-            means, quats, scales, opacities, colors = (a.view(np.float32) for a in ctx.read_in_place(packed))
-        else:
-            means, quats, scales, opacities, colors = ctx.read_many(
-                [(outs[0], np.float32, 3 * n), (outs[1], np.float32, 4 * n), (outs[2], np.float32, 2 * n),
-                 (outs[3], np.float32, n), (v_colors, np.float32, c * n)])
-        ctx.recycler.give_back(recycled)  # read back: nothing else holds them
-        return SurfelGrads(means.reshape(n, 3), quats.reshape(n, 4), scales.reshape(n, 2), opacities,
-                           colors.reshape(n, c))
 
     def _zeros(self, nbytes: int) -> wgpu.GPUBuffer:
         """A zero-filled buffer of at least ``nbytes`` that nothing writes (a missing upstream gradient)."""
