@@ -25,8 +25,9 @@ __all__ = ["Camera", "look_at_w2c", "parse_camera_json", "projection_matrix", "r
 _KEYS = ("width", "height", "K", "w2c")
 
 
-def read_camera_json(path: str | os.PathLike) -> dict:
-    """The JSON object of a camera file (not validated yet: see :func:`parse_camera_json`)."""
+def read_camera_json(path: str | os.PathLike, keys: str = ", ".join(_KEYS)) -> dict:
+    """The JSON object of a camera file, not validated yet (:func:`parse_camera_json` does that for
+    extrinsic cameras; ``keys`` names what the object should hold, for the message when it is not one)."""
     path = Path(path)
     if not path.is_file():
         raise MissingFileError(f"{path}: camera file not found")
@@ -35,7 +36,7 @@ def read_camera_json(path: str | os.PathLike) -> dict:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: not valid JSON ({exc})") from None
     if not isinstance(raw, dict):
-        raise InputError(f"{path}: expected a JSON object with {', '.join(_KEYS)}")
+        raise InputError(f"{path}: expected a JSON object with {keys}")
     return raw
 
 

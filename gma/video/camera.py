@@ -17,7 +17,6 @@ position is the origin.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass
@@ -25,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gma.core.errors import InputError, MissingFileError
+from gma.core.camera import read_camera_json
+from gma.core.errors import InputError
 from gma.data.cameras import Cameras
 
 __all__ = ["CAMERA_FROM_WORLD", "CameraIntrinsics", "Undistortion", "default_focal", "intrinsics",
@@ -120,14 +120,7 @@ def load_intrinsics(path: str | os.PathLike) -> CameraIntrinsics:
     does not silently drop a coefficient. Values are checked here; the fit with the frame in
     :meth:`CameraIntrinsics.check_frame` and :class:`Undistortion`."""
     path = Path(path)
-    if not path.is_file():
-        raise MissingFileError(f"{path}: camera file not found")
-    try:
-        raw = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not a JSON camera file ({exc})") from exc
-    if not isinstance(raw, dict):
-        raise InputError(f"{path}: expected a JSON object with fx, fy, cx, cy (and optionally k1, k2, p1, p2, k3)")
+    raw = read_camera_json(path, "fx, fy, cx, cy (and optionally k1, k2, p1, p2, k3)")
     missing = [k for k in _REQUIRED if k not in raw]
     if missing:
         raise InputError(f"{path}: missing {', '.join(missing)} (a camera file holds fx, fy, cx, cy in pixels, and "
