@@ -68,3 +68,14 @@ def fitted_avatar(body, shape=None, seed: int = 0, **config) -> Avatar:
     state = {k[len("model."):]: v for k, v in load(av.to_bytes()).items() if k.startswith("model.")}
     out.model.load_state_dict(state)
     return out
+
+
+def varied_avatar(body) -> Avatar:
+    """A small avatar (8 features, one surfel a face) with varied colours, scales and offsets: its
+    decoders' weights shifted by seeded noise, so exports and renders have structure to compare."""
+    av = Avatar.create(AvatarConfig(feature_dim=8, fine_per_face=1), body, seed=1)
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for p in av.model.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=g))
+    return av

@@ -7,26 +7,15 @@ import json
 import imageio.v3 as iio
 import numpy as np
 import pytest
-import torch
+from edit_helpers import varied_avatar
 
 from gma.cli import main as gma_main
-
-SMALL = {"feature_dim": 8, "fine_per_face": 1}
 
 
 @pytest.fixture(scope="module")
 def avatar_file(tmp_path_factory, anny_body):
     """A small avatar with varied colours, scales and offsets (random decoder weights), saved."""
-    from gma.avatar import Avatar, AvatarConfig
-
-    av = Avatar.create(AvatarConfig(**SMALL), anny_body, seed=1)
-    g = torch.Generator().manual_seed(0)
-    with torch.no_grad():
-        for p in av.model.parameters():
-            p.add_(0.3 * torch.randn(p.shape, generator=g))
-    path = tmp_path_factory.mktemp("export") / "a.gma"
-    av.save(path)
-    return path
+    return varied_avatar(anny_body).save(tmp_path_factory.mktemp("export") / "a.gma")
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:

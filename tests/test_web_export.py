@@ -12,26 +12,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
+from edit_helpers import varied_avatar
 
 from gma.cli import main as gma_main
 
 REPO = Path(__file__).resolve().parents[1]
-SMALL = {"feature_dim": 8, "fine_per_face": 1}
 VIEW = (256, 256)
 
 
 @pytest.fixture(scope="module")
 def avatar_file(tmp_path_factory, anny_body):
     """A small avatar with varied colours, scales and offsets (random decoder weights), saved."""
-    from gma.avatar import Avatar, AvatarConfig
-
-    av = Avatar.create(AvatarConfig(**SMALL), anny_body, seed=1)
-    g = torch.Generator().manual_seed(0)
-    with torch.no_grad():
-        for p in av.model.parameters():
-            p.add_(0.3 * torch.randn(p.shape, generator=g))
-    return av.save(tmp_path_factory.mktemp("web") / "a.gma")
+    return varied_avatar(anny_body).save(tmp_path_factory.mktemp("web") / "a.gma")
 
 
 def _rotations(quats_xyzw: np.ndarray) -> np.ndarray:
