@@ -230,7 +230,6 @@ class FrameRenderer:
                 self._dropped_work()  # frames in motion only adapt the capacity; they are not redrawn
         else:
             self._encode_pose(src, None, None, timer)
-        self._set_background(opts.background)
         self.frames += 1
         self._ensure_depth(w, h)
         enc = ctx.device.create_command_encoder(label="viewer.overlay")
