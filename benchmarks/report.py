@@ -96,8 +96,10 @@ def _viewer_edit_figures(out: str, _data: dict) -> list[tuple[str, str]]:
 
 
 def _video_figures(out: str, _data: dict) -> list[tuple[str, str]]:
-    return _matches(r"^total (\d+) s", out, lambda m: ("video -> avatar, synthetic turn (import, fits, evals)",
-                                                       f"{m[1]} s"))
+    return _matches(r"^synthetic turn, (\d+) frames at (\d+) px, quick preset: import (\d+) s, fit (\d+) s, "
+                    r"video -> avatar (\d+) s; held-out bbox PSNR ([\d.]+) dB", out,
+                    lambda m: (f"video -> avatar, {m[1]}-frame synthetic mp4 at {m[2]} px: import / fit / total "
+                               "(held-out bbox PSNR)", f"{m[3]} / {m[4]} / {m[5]} s ({m[6]} dB)"))
 
 
 def _web_figures(out: str, _data: dict) -> list[tuple[str, str]]:
@@ -143,8 +145,8 @@ BENCHES = [
     Bench("fit", "Fit steps", "fit_step.py", ["--repeats", "3", "--steps", "4", "--work", "{tmp}"],
           ["--repeats", "1", "--steps", "1", "--work", "{tmp}"], _fit_step_figures),
     Bench("video", "Video to avatar (quick preset)", "video_to_avatar.py",
-          ["--work", "{tmp}", "--skip-iper", "--frames", "16", "--size", "128", "--refine-steps", "50"],
-          ["--work", "{tmp}", "--skip-iper", "--frames", "4", "--size", "64", "--refine-steps", "2"],
+          ["--work", "{tmp}", "--time-only", "--frames", "16", "--size", "128"],
+          ["--work", "{tmp}", "--time-only", "--frames", "4", "--size", "64"],
           _video_figures, _mediapipe_missing),
     Bench("viewer", "Viewer frame rates", "viewer_fps.py", ["--size", "800x600", "--frames", "30"],
           ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--fine-per-face", "1"], _viewer_fps_figures),
