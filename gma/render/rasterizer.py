@@ -413,12 +413,7 @@ class SurfelRasterizer:
         lists = self._sort_bin_rasterize(surfels, camera, st, capacity, key_bits, background_buf,
                                          images + replayed, timer, packed if in_place and n else None)
         image_reads = _image_reads(images, camera, c) if read_images and not in_place else []
-        if in_place:
-            stats, host = self._read_packed(packed, counted=n > 0)
-        elif n:
-            stats, *host = ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
-        else:
-            stats, host = np.zeros(4, np.uint32), ctx.read_many(image_reads)
+        stats, host = self._read_counts_and_images(st, packed if in_place else None, image_reads, n)
         num_isects, needed_bits = int(stats[1]), depth_key_bits(stats)
         del stats   # (with in-place reads a view of the images' mapping)
         # Exact from here on: the backward's passes bound the intersection lists by it.
@@ -449,6 +444,17 @@ class SurfelRasterizer:
         self._hand_back_with(state, lease, [*st.kept, isect_ids, ranges, *([] if in_place else images), *replayed]
                              if replay else None)
         return state
+
+    def _read_counts_and_images(self, st, packed: PackedBuffer | None, image_reads: list, n: int):
+        """A render's projection counts and (where asked) its images, in one transfer: from the mapped
+        ``packed`` buffer when the images were written there, else through ``image_reads``. No surfels, no
+        counts (zeros)."""
+        if packed is not None:
+            return self._read_packed(packed, counted=n > 0)
+        if n:
+            stats, *host = self.ctx.read_many([(st.stats, np.uint32, 4)] + image_reads)
+            return stats, host
+        return np.zeros(4, np.uint32), self.ctx.read_many(image_reads)
 
     def _hand_back_with(self, state: ForwardState, lease, kept: list | None) -> None:
         """When ``state`` is gone, give back its surfel texels' ``lease`` (the backward binds them) and, for
@@ -518,21 +524,8 @@ class SurfelRasterizer:
         upstream = self._upload_upstream(v_color, v_alpha, v_normal, v_depth, c, hw, normal_depth, recycled)
         records = state.records
         tx, ty = tile_grid(cam.width, cam.height)
-        defines = self.backward_defines(c)
-        # As the forward rendered and laid out the surfels this pass reads.
-        defines.update(TILE_WALK=state.proj.tile_walk, WALK_LAYOUT=state.proj.walk_layout)
-        # With records the backward's entry point is the tile walk (tile_walk_bwd.wgsl, the only writer of
-        # records); with atomics each subgroup replays its own block.
-        defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=v_alpha is not None,
-                       GRAD_RECORDS=records is not None)
-        # (Only the tile walk, the entry point with records, takes its tiles from a queue.)
-        defines["WORK_QUEUE"] = records is not None and state.proj.tile_walk and self.options.work_queues
-        texels = self._texels_for(defines, n) if records is not None else None
-        defines["SURFEL_TEXELS"] = texels is not None
-        # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
-        record_bytes = _record_bytes(state.num_isects, normal_depth)
-        defines["RECORD_TEXELS"] = use_record_texels = (records is not None
-                                                        and record_bytes // 16 <= self.texels.max_texels)
+        defines, texels, record_bytes = self._backward_variant(state, normal_depth, v_alpha is not None)
+        use_record_texels = defines["RECORD_TEXELS"]
         enc = ctx.device.create_command_encoder()
         raster = ctx.compute_pipeline("render/rasterize_bwd.wgsl", defines)
         resources = dict(enumerate([state.proj.params, state.proj.projected, surfels.colors, state.isect_ids,
@@ -584,6 +577,25 @@ class SurfelRasterizer:
         grads_out = self._read_gradients(packed if in_place else None, [*outs, v_colors], n, c)
         ctx.recycler.give_back(recycled)  # read back: nothing else holds them
         return grads_out
+
+    def _backward_variant(self, state: ForwardState, normal_depth: bool, alpha_grads: bool):
+        """The backward shader's defines for a render as its forward ran, the surfel texels it reads (None
+        without records) and the bytes of its gradient records."""
+        records, n = state.records, state.num_surfels
+        defines = self.backward_defines(state.channels)
+        # As the forward rendered and laid out the surfels this pass reads.
+        defines.update(TILE_WALK=state.proj.tile_walk, WALK_LAYOUT=state.proj.walk_layout)
+        # With records the backward's entry point is the tile walk (tile_walk_bwd.wgsl, the only writer of
+        # records); with atomics each subgroup replays its own block.
+        defines.update(NORMAL_DEPTH_GRADS=normal_depth, ALPHA_GRADS=alpha_grads, GRAD_RECORDS=records is not None)
+        # (Only the tile walk, the entry point with records, takes its tiles from a queue.)
+        defines["WORK_QUEUE"] = records is not None and state.proj.tile_walk and self.options.work_queues
+        texels = self._texels_for(defines, n) if records is not None else None
+        defines["SURFEL_TEXELS"] = texels is not None
+        # The records go to a texture that project_bwd reads (scattered reads; see surfel_texels.py).
+        record_bytes = _record_bytes(state.num_isects, normal_depth)
+        defines["RECORD_TEXELS"] = records is not None and record_bytes // 16 <= self.texels.max_texels
+        return defines, texels, record_bytes
 
     def _bind_gradient_sums(self, enc, resources: dict, state: ForwardState, record_bytes: int,
                             use_record_texels: bool, atomic_colors) -> tuple:
