@@ -123,9 +123,13 @@ def _gsplat_missing() -> str | None:
     return "gsplat not installed" if peer_gsplat.missing_reason() else None
 
 
-def _browser_missing() -> str | None:
+def _web_page_missing() -> str | None:
     import web_browser
 
+    from gma.export.web import BUNDLE
+
+    if not BUNDLE.is_file():
+        return "the web page's JavaScript is not built (cd web && npm ci && npm run build)"
     return web_browser.missing_browser()
 
 
@@ -153,7 +157,7 @@ BENCHES = [
     Bench("edit", "Editing in the viewer", "viewer_edit.py", ["--size", "640x480", "--repeats", "3"],
           ["--size", "96x64", "--fine-per-face", "1", "--feature-dim", "8", "--faces", "100", "--repeats", "1",
            "--stroke-frames", "3"], _viewer_edit_figures),
-    Bench("web", "The avatar as a web page", "web_export.py", [], [], _web_figures, _browser_missing),
+    Bench("web", "The avatar as a web page", "web_export.py", [], [], _web_figures, _web_page_missing),
     Bench("peer", "Against gsplat's PyTorch 2DGS path (peer ratio)", "peer_compare.py",
           ["--counts", "100000", "--repeats", "3", "--json", "{json}"],
           ["--counts", "500", "--repeats", "1", "--json", "{json}"], _peer_figures, _gsplat_missing),
