@@ -4,16 +4,22 @@ the quick preset as ``gma fit`` does, and the faces left at the untrained defaul
 and after the fill of the unseen faces (``gma.edit.unseen``).
 
 The frames are chosen by the imported poses' root yaw (:func:`root_yaw`: the angle between the body's
-forward axis and the direction to the camera). A face is at its *default colour*
-(:func:`gma.edit.unseen.default_colour_faces`) when its decoded colour lies within ``--tolerance``
-(0-1, every channel, every surfel) of what the fitted decoders make of the features the fit started it
-with: the fit never changed it.
+forward axis and the direction to the camera). Two counts of faces left at the untrained default:
+
+- *untrained* (:func:`gma.edit.unseen.untrained_faces`): texture features still exactly those the fit
+  started the face with, so it decodes to the untrained default colour by construction;
+- *at the default colour* (:func:`gma.edit.unseen.default_colour_faces`): decoded colour within
+  ``--tolerance`` (0-1, every channel, every surfel) of what the fitted decoders make of the face's
+  starting features. Faces the fit did train land that close by chance too; their share among the
+  faces seen well is printed beside it as the chance rate.
 
 Writes ``--figure``: the avatar in its canonical pose from the front, then from behind before and after
-the fill; prints the counts (and ``--work``/results.json). An import or a fit already in ``--work`` is
-reused; ``--imported`` takes an existing ``gma import video`` of the clip instead of importing it again.
+the fill; prints the counts, and the PSNR and colour error on the clip's frames that show the person's
+back (beyond 150 deg; their poses as imported, not refined by the fit); also ``--work``/results.json.
+An import or a fit already in ``--work`` is reused; ``--imported`` takes an existing ``gma import video``
+of the clip instead of importing it again.
 
-    python benchmarks/unseen_real.py [--imported FOLDER] [--work out/bench_unseen_real]
+    PYTHONPATH=. python benchmarks/unseen_real.py [--imported FOLDER] [--work out/bench_unseen_real]
 """
 
 from __future__ import annotations
@@ -29,10 +35,11 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import iper_clip, iper_missing, machine  # noqa: E402
+from unseen_sides import score_views  # noqa: E402
 
 from gma.body import load_body  # noqa: E402
 from gma.data import read_sequence  # noqa: E402
-from gma.edit.unseen import AfterFit, default_colour_faces, initial_features  # noqa: E402
+from gma.edit.unseen import AfterFit, default_colour_faces, initial_features, untrained_faces  # noqa: E402
 from gma.gpu import get_context  # noqa: E402
 from gma.render.image_io import save_png  # noqa: E402
 from gma.train.config import preset  # noqa: E402
@@ -84,6 +91,12 @@ def views(avatar, body, ctx, size: int) -> list[np.ndarray]:
             for name in ("front", "back")]
 
 
+def _defaults(avatar, start, tolerance: float) -> dict[str, np.ndarray]:
+    """[F] bool masks of the faces left at the untrained default, by both counts (module docstring)."""
+    return {"untrained": untrained_faces(avatar.model, start),
+            "default_colour": default_colour_faces(avatar.model, start, tolerance)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--imported", help="a 'gma import video' of the clip (default: import it into --work)")
@@ -116,26 +129,39 @@ def main(argv=None) -> int:
     avatar = trainer.run(resume=True)  # without a finish step: the avatar as the fit left it
     fit_s = time.perf_counter() - t0
     start = initial_features(avatar, cfg.seed)
-    before = default_colour_faces(avatar.model, start, args.tolerance)
+    before = _defaults(avatar, start, args.tolerance)
     picture = views(avatar, body, ctx, args.size)
+    back_before, _ = score_views(avatar, seq, "back", cfg.resolution, body, ctx)
     t0 = time.perf_counter()
     summary = AfterFit(ctx)(avatar, body, trainer.posed_meshes(0), mirror=cfg.symmetry > 0)
     fill_s = time.perf_counter() - t0
-    after = default_colour_faces(avatar.model, start, args.tolerance)
-    unseen = (avatar.face_seen < 0.5).numpy()
+    after = _defaults(avatar, start, args.tolerance)
+    seen = avatar.face_seen.numpy()
+    unseen, seen_well = seen < 0.5, seen >= 0.8
     picture.append(views(avatar, body, ctx, args.size)[1])
+    back_after, _ = score_views(avatar, seq, "back", cfg.resolution, body, ctx)
     save_png(Path(args.figure), np.concatenate(picture, 1))
     result = {"frames": len(seq), "train_frames": len(seq.split("train")), "yaw_deg": np.round(yaw, 1).tolist(),
               "fit_s": round(fit_s, 1), "fill_s": round(fill_s, 1), "tolerance": args.tolerance,
               "faces": int(len(unseen)), "unseen_faces": int(unseen.sum()), "guessed": summary["guessed"],
-              "default_before": {"all": int(before.sum()), "unseen": int(before[unseen].sum())},
-              "default_after": {"all": int(after.sum()), "unseen": int(after[unseen].sum())}}
+              "seen_well_faces": int(seen_well.sum()), "back_before": back_before, "back_after": back_after}
+    for when, counts in (("before", before), ("after", after)):
+        result[when] = {name: {"all": int(m.sum()), "unseen": int(m[unseen].sum()),
+                               "seen_well": int(m[seen_well].sum())} for name, m in counts.items()}
     print(f"# unseen sides on real footage: {machine()}; iPER turn, {result['train_frames']} of {len(seq)} frames "
           f"within +-{args.max_yaw:g} deg of the front, quick preset")
     print(f"guessed: {100 * summary['guessed']['area']:.0f} % of the surface, {result['unseen_faces']} of "
-          f"{result['faces']} faces; faces at the default colour (tolerance {args.tolerance:g}): "
-          f"before {result['default_before']['all']} ({result['default_before']['unseen']} unseen), "
-          f"after {result['default_after']['all']} ({result['default_after']['unseen']} unseen)")
+          f"{result['faces']} faces; fill {result['fill_s']} s")
+    print(f"frames with the back to the camera ({back_before['frames']}, poses as imported, {cfg.resolution} px): PSNR "
+          f"{back_before['psnr']:.2f} -> {back_after['psnr']:.2f} dB, colour error {back_before['colour_error']:.1f} "
+          f"-> {back_after['colour_error']:.1f}")
+    print("| faces | before the fill | after | of them unseen (before / after) | chance rate (seen well, after) |")
+    print("|---|---|---|---|---|")
+    for name, label in (("untrained", "untrained features"),
+                        ("default_colour", f"at the default colour (tolerance {args.tolerance:g})")):
+        b, a = result["before"][name], result["after"][name]
+        print(f"| {label} | {b['all']} | {a['all']} | {b['unseen']} / {a['unseen']} | "
+              f"{100 * a['seen_well'] / max(result['seen_well_faces'], 1):.2f} % |")
     (work / "results.json").write_text(json.dumps({"args": vars(args), "machine": machine(), "result": result},
                                                   indent=1))
     return 0

@@ -89,7 +89,9 @@ def _case_sequence(work: Path, base, case: str):
 
 
 @torch.no_grad()
-def _score(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, list[np.ndarray]]:
+def score_views(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, list[np.ndarray]]:
+    """({psnr, colour_error, frames}, [ground truth | render] per frame) of ``avatar`` on a split of
+    ``seq`` at ``resolution``: PSNR over the image, colour error (0-255) inside the true silhouette."""
     frames = load_frames(seq, body, split, resolution, identity=avatar.shape)
     decoded = avatar.decode()
     psnrs, errors, images = [], [], []
@@ -120,7 +122,7 @@ def run_case(case: str, seq, work: Path, args, body, ctx) -> dict:
     avatar = trainer.run(resume=True)  # Trainer without a finish step: the avatar as the fit left it
     fit_s = time.perf_counter() - t0
     views = list(CASES[case][1])
-    before = {v: _score(avatar, seq, v, args.size, body, ctx) for v in views}
+    before = {v: score_views(avatar, seq, v, args.size, body, ctx) for v in views}
     meshes = list(trainer.posed_meshes(0))
     result = {"train_frames": len(seq.split("train")), "fit_s": round(fit_s, 1), "fills": {}}
     variants = [(w, True) for w in args.front_back] + ([(args.front_back[0], False)] if args.no_crown else [])
@@ -129,7 +131,7 @@ def run_case(case: str, seq, work: Path, args, body, ctx) -> dict:
         t0 = time.perf_counter()
         fill = AfterFit(ctx, front_back=_weights(weight), crown=crown)
         summary = fill(filled, body, iter(meshes), mirror=cfg.symmetry > 0)
-        after = {v: _score(filled, seq, v, args.size, body, ctx) for v in views}
+        after = {v: score_views(filled, seq, v, args.size, body, ctx) for v in views}
         name = weight + ("" if crown else ", no crown")
         result["fills"][name] = {"fill_s": round(time.perf_counter() - t0, 1), "guessed": summary["guessed"],
                                    "filled": summary["filled"], "views": {v: after[v][0] for v in views}}

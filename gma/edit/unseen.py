@@ -28,7 +28,7 @@ from gma.edit.paint import paint_features
 
 __all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "SOURCE", "AfterFit", "body_orientation", "default_colour_faces",
            "depth_axis", "face_areas", "fill_unseen_faces", "guessed_share", "initial_features", "observe_faces",
-           "projected_areas", "seen_picture", "seen_score", "unseen_mask"]
+           "projected_areas", "seen_picture", "seen_score", "unseen_mask", "untrained_faces"]
 
 # A face's summed cover (:func:`observe_faces`) at which its seen score is 1 - 1/e: half of it seen in one
 # frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
@@ -116,6 +116,13 @@ def initial_features(avatar, seed: int) -> torch.Tensor:
 
     model = avatar.model
     return AvatarModel(model.config, model.faces, avatar.rest_vertices, seed=seed).f_tex.detach()
+
+
+def untrained_faces(model, start: torch.Tensor) -> np.ndarray:
+    """[F] bool: the faces of ``model`` whose texture features are still exactly ``start`` [F, k]
+    (:func:`initial_features`): no step of the fit and no fill changed them, so they decode to the
+    untrained default colour."""
+    return (model.f_tex.detach() == start).all(1).numpy()
 
 
 @torch.no_grad()
