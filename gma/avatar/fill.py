@@ -36,7 +36,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 from scipy.spatial import cKDTree
 
-__all__ = ["CROWN_UP", "FILL_GROUPS", "FRONT_BACK", "FillResult", "Orientation", "fill_groups", "fill_unseen",
+__all__ = ["FILL_GROUPS", "FRONT_BACK", "FillResult", "Orientation", "fill_groups", "fill_unseen",
            "front_projection", "harmonic_fill"]
 
 # Fill groups, in the order their masks are applied (a later one wins where region masks overlap).
@@ -153,50 +153,46 @@ def front_projection(values: np.ndarray, known: np.ndarray, targets: np.ndarray,
 
 
 def fill_unseen(values, known, pairs, groups, centers, depth_axis: int, front_back=None,
-                radius: float = FRONT_BACK_RADIUS, sources=None, mirror_of=None,
-                orientation: Orientation | None = None) -> FillResult:
+                radius: float = FRONT_BACK_RADIUS, mirror_of=None, orientation: Orientation | None = None
+                ) -> FillResult:
     """Fill the values of the faces that are not ``known`` (see the module docstring).
 
-    values [F, D] per-face values (flattened surfel colours); known [F] bool (seen, or otherwise trusted);
-    pairs [P, 2] faces sharing an edge (``gma.body.geometry.face_adjacency``); groups [F] int fill groups
-    (:func:`fill_groups`); centers [F, 3] rest-pose face centres (m); depth_axis: the body's front-back
-    axis (0, 1, 2); front_back: weights of the front-to-back prior per group name (default
-    :data:`FRONT_BACK`), or one weight in [0, 1] for every group of :data:`FRONT_BACK`; radius: how far (m)
-    across the depth axis a face looks for its counterpart; sources [F] bool (default: ``known``): the known
-    faces values are taken from. A known face that is not a source keeps its value but lends it to no one.
-    mirror_of [F] int (optional): each face's left-right mirror face (step 1). orientation (optional): the
-    body's axes, for the crown prior of the head (step 4)."""
+    values [F, D] per-face values (flattened surfel colours); known [F] bool (seen well: the faces values
+    are taken from); pairs [P, 2] faces sharing an edge (``gma.body.geometry.face_adjacency``); groups [F]
+    int fill groups (:func:`fill_groups`); centers [F, 3] rest-pose face centres (m); depth_axis: the
+    body's front-back axis (0, 1, 2); front_back: weights of the front-to-back prior per group name
+    (default :data:`FRONT_BACK`), or one weight in [0, 1] for every group of :data:`FRONT_BACK`; radius: how
+    far (m) across the depth axis a face looks for its counterpart; mirror_of [F] int (optional): each
+    face's left-right mirror face (step 1); orientation (optional): the body's axes, for the crown prior of
+    the head (step 4)."""
     values = np.asarray(values, np.float64)
     known = np.asarray(known, bool)
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
     groups = np.asarray(groups, np.int64)
     weights = _front_back_weights(front_back)
-    sources = known if sources is None else np.asarray(sources, bool) & known
     n = len(values)
     how = np.where(known, 0, -1).astype(np.int8)
-    if known.all() or not sources.any():
+    if known.all() or not known.any():
         return FillResult(values.copy(), how)
-    values, known, sources = _from_mirror(values, known, sources, mirror_of, how)
+    values, known = _from_mirror(values, known, mirror_of, how)
     within = _adjacency(pairs, n, groups[pairs[:, 0]] == groups[pairs[:, 1]])
-    out, filled = harmonic_fill(values, sources, within)
-    filled &= ~known
+    out, filled = harmonic_fill(values, known, within)
     how[filled] = 1
     centers = np.asarray(centers, np.float64)
-    _mix_front_projection(out, values, sources, filled, groups, centers, depth_axis, weights, radius)
+    _mix_front_projection(out, values, known, filled, groups, centers, depth_axis, weights, radius)
     if orientation is not None:
-        _mix_crown(out, values, sources, filled, groups, centers, orientation)
+        _mix_crown(out, values, known, filled, groups, centers, orientation)
     rest = ~known & ~filled
-    if rest.any():  # whole group parts unseen: across groups, from the sources and what is filled so far
-        across, more = harmonic_fill(out, sources | filled, _adjacency(pairs, n))
+    if rest.any():  # whole group parts unseen: across groups, from the known faces and what is filled so far
+        across, more = harmonic_fill(out, known | filled, _adjacency(pairs, n))
         more &= rest
         out[more] = across[more]
         how[more] = 2
         rest &= ~more
     for i in np.nonzero(rest)[0]:  # components of the mesh nothing on which was seen
-        same = sources & (groups == groups[i])
-        out[i] = values[same].mean(0) if same.any() else values[sources].mean(0)
+        same = known & (groups == groups[i])
+        out[i] = values[same].mean(0) if same.any() else values[known].mean(0)
         how[i] = 3
-    out[known] = values[known]  # a known face that was no source was solved for in the systems above
     return FillResult(out, how)
 
 
@@ -217,17 +213,17 @@ def _front_back_weights(front_back) -> dict[str, float]:
     return weights
 
 
-def _from_mirror(values, known, sources, mirror_of, how):
-    """Step 1: unseen faces whose mirror face is a source take its value and become sources themselves
-    (``how`` 4, in place). Returns (values, known, sources), new arrays."""
+def _from_mirror(values, known, mirror_of, how):
+    """Step 1: unknown faces whose mirror face is known take its value and count as known from then on
+    (``how`` 4, in place). Returns (values, known), new arrays."""
     if mirror_of is None:
-        return values, known, sources
+        return values, known
     mirror_of = np.asarray(mirror_of, np.int64)
-    take = ~known & sources[mirror_of]
+    take = ~known & known[mirror_of]
     values = values.copy()
     values[take] = values[mirror_of[take]]
     how[take] = _HOW["mirror"]
-    return values, known | take, sources | take
+    return values, known | take
 
 
 def _mix_front_projection(out, values, known, filled, groups, centers, depth_axis, weights, radius) -> None:

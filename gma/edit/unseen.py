@@ -6,10 +6,12 @@ face's normal and the direction to the camera (a face seen at a grazing angle sa
 colour). :func:`seen_score` maps that to [0, 1], saved in the ``.gma`` as ``face_seen``; a face under 0.5
 (:data:`SEEN`) is "unseen" (``gma edit --select unseen``, ``gma eval``'s seen / guessed picture).
 
-:func:`fill_unseen_faces` is the step after a fit: the decoded colours of the unseen faces are filled
-from the seen ones (:func:`gma.avatar.fill.fill_unseen`: over the surface within body-part groups, plus
-a front-to-back prior for the garments), then turned into ordinary features by the same solve as paint
-(:func:`gma.edit.paint.paint_features`), so paint, stamp and transfer work on them like on any face.
+:func:`fill_unseen_faces` is the step after a fit: the decoded colours of the faces not seen well are
+filled from the faces seen well (:func:`gma.avatar.fill.fill_unseen`: from the mirror face, over the
+surface within body-part groups, a front-to-back prior per group, the crown for the back of the head),
+then turned into ordinary features by the same solve as paint (:func:`gma.edit.paint.paint_features`), so
+paint, stamp and transfer work on them like on any face. :func:`untrained_faces` and
+:func:`default_colour_faces` count what a fit left at its starting features (``benchmarks/unseen_real.py``).
 """
 
 from __future__ import annotations
@@ -34,8 +36,8 @@ __all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "SOURCE", "AfterFit", "body_or
 # frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
 SEEN_COVER = 0.5
 SEEN = 0.5
-# Faces the fill takes values from: seen well (a summed cover of 0.8). A face seen only obliquely keeps its
-# own colour but lends it to no one: the fit blends such faces with the background at the silhouette.
+# Faces the fill keeps and takes values from: seen well (a summed cover of 0.8). The others are filled, those
+# seen only at a grazing angle included: the fit blends such faces with the background at the silhouette.
 SOURCE = 0.8
 # Face-ID renders are made at least this large (longest side, pixels), whatever the fit's resolution, so
 # that faces smaller than a fitting pixel are still found where they show.
