@@ -81,11 +81,12 @@ def test_batch_folder_keeps_its_fit_options(tmp_path):
 
 def test_summary_markdown_lists_every_person():
     rows = [{"person": "a", "status": "done", "seconds": 3.0, "novel_view_psnr": 21.234, "novel_pose_psnr": None,
-             "avatar_mb": 1.9, "resumed_from": 2, "error": None},
+             "avatar_mb": 1.9, "guessed_pct": 35.1, "resumed_from": 2, "error": None},
             {"person": "b", "status": "failed", "seconds": 0.0, "novel_view_psnr": None, "novel_pose_psnr": None,
-             "avatar_mb": None, "resumed_from": None, "error": "fit: x|y"}]
+             "avatar_mb": None, "guessed_pct": None, "resumed_from": None, "error": "fit: x|y"}]
     md = format_markdown(rows)
-    assert "| a | done | 3.00 | 21.23 |" in md and "x\\|y" in md and "1 of 2 people done" in md
+    assert "| a | done | 3.00 | 21.23 |" in md and "| 1.90 | 35.10 |" in md
+    assert "x\\|y" in md and "1 of 2 people done" in md
 
 
 def test_missing_ray_is_one_line(monkeypatch, tmp_path, capsys):
