@@ -10,11 +10,13 @@ Two cases, one fit each (the fill is a step after the fit, so "before" and "afte
   scored on the other side (250-290 deg), which the symmetry prior (on in both) covers.
 
 Scores per view set: PSNR over the image, and the mean absolute colour error (0-255) inside the true
-silhouette, before the fill and after it with each weight of its front-to-back prior (``--front-back``).
+silhouette, before the fill and after it with each weight of its front-to-back prior (``--front-back``:
+``default``, the fill's per-group weights, or one weight for every group), with and without the crown
+prior of the head (``--no-crown``, one more fill with the first weight).
 Writes a table (stdout and ``--work``/results.json) and ``--figure``: a back view, ground truth | before |
 after (the first weight). A fit already finished in ``--work`` is reused.
 
-    python benchmarks/unseen_sides.py --size 192 --frames 36 --steps 200 400
+    PYTHONPATH=. python benchmarks/unseen_sides.py --size 160 --frames 36 --steps 120 240
 """
 
 from __future__ import annotations
@@ -87,7 +89,9 @@ def _case_sequence(work: Path, base, case: str):
 
 
 @torch.no_grad()
-def _score(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, list[np.ndarray]]:
+def score_views(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, list[np.ndarray]]:
+    """({psnr, colour_error, frames}, [ground truth | render] per frame) of ``avatar`` on a split of
+    ``seq`` at ``resolution``: PSNR over the image, colour error (0-255) inside the true silhouette."""
     frames = load_frames(seq, body, split, resolution, identity=avatar.shape)
     decoded = avatar.decode()
     psnrs, errors, images = [], [], []
@@ -102,6 +106,11 @@ def _score(avatar, seq, split: str, resolution: int, body, ctx) -> tuple[dict, l
             "frames": len(frames)}, images
 
 
+def _weights(name: str):
+    """``--front-back`` value -> ``AfterFit``'s front_back (None: the fill's default per-group weights)."""
+    return None if name == "default" else float(name)
+
+
 def run_case(case: str, seq, work: Path, args, body, ctx) -> dict:
     """Fit (or reuse a finished fit in ``work``), score before the fill and after it with each
     ``--front-back`` weight (a fresh copy of the fitted avatar each)."""
@@ -113,15 +122,18 @@ def run_case(case: str, seq, work: Path, args, body, ctx) -> dict:
     avatar = trainer.run(resume=True)  # Trainer without a finish step: the avatar as the fit left it
     fit_s = time.perf_counter() - t0
     views = list(CASES[case][1])
-    before = {v: _score(avatar, seq, v, args.size, body, ctx) for v in views}
+    before = {v: score_views(avatar, seq, v, args.size, body, ctx) for v in views}
     meshes = list(trainer.posed_meshes(0))
     result = {"train_frames": len(seq.split("train")), "fit_s": round(fit_s, 1), "fills": {}}
-    for k, weight in enumerate(args.front_back):
+    variants = [(w, True) for w in args.front_back] + ([(args.front_back[0], False)] if args.no_crown else [])
+    for k, (weight, crown) in enumerate(variants):
         filled = Avatar.load(out, body)
         t0 = time.perf_counter()
-        summary = AfterFit(ctx, front_back=weight)(filled, body, iter(meshes), mirror=cfg.symmetry > 0)
-        after = {v: _score(filled, seq, v, args.size, body, ctx) for v in views}
-        result["fills"][weight] = {"fill_s": round(time.perf_counter() - t0, 1), "guessed": summary["guessed"],
+        fill = AfterFit(ctx, front_back=_weights(weight), crown=crown)
+        summary = fill(filled, body, iter(meshes), mirror=cfg.symmetry > 0)
+        after = {v: score_views(filled, seq, v, args.size, body, ctx) for v in views}
+        name = weight + ("" if crown else ", no crown")
+        result["fills"][name] = {"fill_s": round(time.perf_counter() - t0, 1), "guessed": summary["guessed"],
                                    "filled": summary["filled"], "views": {v: after[v][0] for v in views}}
         if case == "front" and k == 0:
             mid = len(before["back"][1]) // 2  # the frame nearest 180 deg
@@ -139,13 +151,18 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=36, help="frames in the whole turn (every 360/N deg)")
     ap.add_argument("--steps", type=int, nargs=2, default=(200, 400), help="stage 1 and stage 2 steps")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
-    ap.add_argument("--front-back", type=float, nargs="+", default=(0.5, 0.0, 1.0),
-                    help="weights of the fill's front-to-back prior to score (the first: the default, and the figure)")
+    ap.add_argument("--front-back", nargs="+", default=("default", "0", "0.5", "1"),
+                    help="front-to-back weights to score: 'default' (the fill's per-group weights) or one weight "
+                         "for every group (the first: the figure)")
+    ap.add_argument("--no-crown", action="store_true", help="also fill with the first weight without the crown prior")
     args = ap.parse_args(argv)
     if args.size < 16 or args.frames < 6 or min(args.steps) < 1:
         ap.error("need --size >= 16, --frames >= 6 and at least one step per stage")
-    if not all(0 <= w <= 1 for w in args.front_back):
-        ap.error("--front-back weights must lie in [0, 1]")
+    try:
+        if not all(w == "default" or 0 <= float(w) <= 1 for w in args.front_back):
+            raise ValueError
+    except ValueError:
+        ap.error("--front-back: 'default' or weights in [0, 1]")
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     ctx, body = get_context(), load_body("anny")
@@ -163,11 +180,11 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|---|---|")
     for case, r in results.items():
         for view, b in r["before"].items():
-            for weight, fill in r["fills"].items():
-                a = fill["views"][view]
-                print(f"| {case} | {view} ({b['frames']}) | {r['train_frames']} | {weight:g} | {b['psnr']:.2f} | "
+            for weight, filled in r["fills"].items():
+                a = filled["views"][view]
+                print(f"| {case} | {view} ({b['frames']}) | {r['train_frames']} | {weight} | {b['psnr']:.2f} | "
                       f"{a['psnr']:.2f} | {b['colour_error']:.1f} | {a['colour_error']:.1f} | "
-                      f"{100 * fill['guessed']['area']:.0f} % |")
+                      f"{100 * filled['guessed']['area']:.0f} % |")
     (work / "results.json").write_text(json.dumps({"args": vars(args), "machine": machine(), "results": results},
                                                   indent=1, default=str))
     return 0

@@ -81,11 +81,12 @@ def test_batch_folder_keeps_its_fit_options(tmp_path):
 
 def test_summary_markdown_lists_every_person():
     rows = [{"person": "a", "status": "done", "seconds": 3.0, "novel_view_psnr": 21.234, "novel_pose_psnr": None,
-             "avatar_mb": 1.9, "resumed_from": 2, "error": None},
+             "avatar_mb": 1.9, "guessed_pct": 35.1, "resumed_from": 2, "error": None},
             {"person": "b", "status": "failed", "seconds": 0.0, "novel_view_psnr": None, "novel_pose_psnr": None,
-             "avatar_mb": None, "resumed_from": None, "error": "fit: x|y"}]
+             "avatar_mb": None, "guessed_pct": None, "resumed_from": None, "error": "fit: x|y"}]
     md = format_markdown(rows)
-    assert "| a | done | 3.00 | 21.23 |" in md and "x\\|y" in md and "1 of 2 people done" in md
+    assert "| a | done | 3.00 | 21.23 |" in md and "| 1.90 | 35.10 |" in md
+    assert "x\\|y" in md and "1 of 2 people done" in md
 
 
 def test_missing_ray_is_one_line(monkeypatch, tmp_path, capsys):
@@ -124,6 +125,21 @@ def test_a_failing_step_is_recorded_not_raised(tmp_path):
     assert json.loads((tmp_path / "out" / "clip" / "status.json").read_text())["state"] == "failed"
 
 
+def test_a_batch_fit_fills_the_unseen_faces(tiny_sequence, tmp_path):
+    """The fit step runs the same step after the fit as ``gma fit``: the avatar has its seen record and
+    the fill's summary, and the status facts say how much was guessed."""
+    from gma.avatar import Avatar
+    from gma.batch.steps import fit_step
+
+    shutil.copytree(tiny_sequence(1).root, tmp_path / "p1")
+    job = PersonJob(find_people([str(tmp_path / "p1")])[0], tmp_path / "out", _batch(steps=("fit",)),
+                    preset("quick", **TINY))
+    facts = fit_step(job)
+    avatar = Avatar.load(job.avatar_path)
+    assert avatar.face_seen is not None and avatar.info["unseen"]["filled"] is not None
+    assert facts["guessed_area"] == avatar.info["unseen"]["guessed"]["area"] > 0  # a front-facing clip
+
+
 def _fake_person(tmp_path):
     (tmp_path / "s").mkdir(exist_ok=True)
     (tmp_path / "s" / "cameras.json").write_text("{}")
@@ -158,13 +174,15 @@ def ray_runtime():
 def single(people, gpu, anny_body, tmp_path_factory):
     """What ``gma fit SEQ -o pN.gma`` and ``gma eval`` give for p1 and p2, fitted here in-process."""
     from gma.data import read_sequence
+    from gma.edit.unseen import AfterFit
     from gma.train.evaluate import evaluate_splits
     from gma.train.trainer import Trainer
 
     root, cfg, out = tmp_path_factory.mktemp("single"), preset("quick", **TINY), {}
     for name in ("p1", "p2"):
         seq = read_sequence(people[name].source)
-        av = Trainer(cfg, seq, root / f"{name}.gma", body=anny_body, ctx=gpu, progress=False).run()
+        av = Trainer(cfg, seq, root / f"{name}.gma", body=anny_body, ctx=gpu, progress=False,
+                     finish=AfterFit(gpu)).run()
         ev = evaluate_splits(av, seq, out_dir=None, resolution=EVAL_RES, body=anny_body, ctx=gpu, report=None)
         out[name] = ({k: v.clone() for k, v in av.model.state_dict().items()}, ev["test_view"]["mean"]["psnr"])
     return out
@@ -235,6 +253,7 @@ def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_
     from gma.batch.runner import run_batch
     from gma.batch.task import phase1_config
     from gma.data import read_sequence
+    from gma.edit.unseen import AfterFit
     from gma.train.trainer import Trainer
 
     fit = preset("quick", **TINY)
@@ -243,9 +262,11 @@ def test_shared_decoders_in_two_phases(people, ray_runtime, gpu, anny_body, tmp_
     assert [r["status"] for r in rows] == ["done"] * 3
     # The same as: gma fit p1 p2 -o ref (twice the steps); gma fit p3 -o p3.gma --decoders ref/decoders.gma
     seqs = [read_sequence(p.source) for p in trio]
-    Trainer(phase1_config(fit, 2), seqs[:2], tmp_path / "ref", body=anny_body, ctx=gpu, progress=False).run()
+    Trainer(phase1_config(fit, 2), seqs[:2], tmp_path / "ref", body=anny_body, ctx=gpu, progress=False,
+            finish=AfterFit(gpu)).run()
     own = dataclasses.replace(fit, decoders=str(tmp_path / "ref" / "decoders.gma"))
-    p3 = Trainer(own, seqs[2], tmp_path / "p3.gma", body=anny_body, ctx=gpu, progress=False).run()
+    p3 = Trainer(own, seqs[2], tmp_path / "p3.gma", body=anny_body, ctx=gpu, progress=False,
+                 finish=AfterFit(gpu)).run()
     from gma.avatar import Avatar
 
     for name in ("p1", "p2"):

@@ -90,9 +90,60 @@ def test_front_projection_finds_nothing_beyond_its_radius():
     assert found[0] and out[0, 0] == pytest.approx(1.0)
 
 
-def test_front_back_weight_out_of_range_is_refused():
+@pytest.mark.parametrize("weights", [1.5, {"chest": -0.1}, {"torso": 0.5}], ids=["above 1", "negative", "no group"])
+def test_front_back_weight_out_of_range_is_refused(weights):
     with pytest.raises(ValueError, match="front_back"):
-        fill_unseen(np.zeros((2, 1)), np.array([True, False]), CHAIN[:1], np.zeros(2, int), _centers(2), 1, 1.5)
+        fill_unseen(np.zeros((2, 1)), np.array([True, False]), CHAIN[:1], np.zeros(2, int), _centers(2), 1, weights)
+
+
+def test_front_back_weights_are_per_group():
+    # The ring of the test above twice: a chest ring (faces 0-3) and a lower-body ring (4-7), same places.
+    centers = np.array([[0.0, -1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 0.0, 0.0], [-0.5, 0.0, 0.0]] * 2)
+    values = np.array([[1.0, 0.0], [0.5, 0.5], [0.0, 1.0], [0.0, 1.0]] * 2)
+    known = np.array([True, False, True, True] * 2)
+    ring = np.array([[0, 2], [2, 1], [1, 3], [3, 0]])
+    groups = np.repeat([FILL_GROUPS.index("chest"), FILL_GROUPS.index("lower_body")], 4)
+    res = fill_unseen(values, known, np.concatenate([ring, ring + 4]), groups, centers, 1,
+                      {"chest": 0.0, "lower_body": 1.0})
+    np.testing.assert_allclose(res.values[1], [0.0, 1.0])  # the chest's back: its sides alone
+    np.testing.assert_allclose(res.values[5], [1.0, 0.0])  # the trousers' back: their front alone
+
+
+def _head(normals_and_values):
+    """A head of faces in a row (centres along x, so the crown search across z finds them all)."""
+    normals = np.array([n for n, _ in normals_and_values], float)
+    values = np.array([[v] for _, v in normals_and_values], float)
+    n = len(values)
+    return normals, values, np.c_[np.arange(n) * 0.01, np.zeros(n), np.zeros(n)]
+
+
+def test_the_back_of_the_head_takes_the_crown_not_the_face():
+    from gma.avatar.fill import Orientation
+
+    # Anny's axes: up +z, forward -y. Face (skin 1.0, seen), crown (hair 0.0, seen), back of the head and
+    # the chin underside (unseen). The chain runs face - back - crown, so the surface alone blends them.
+    normals, values, centers = _head([((0, -1, 0), 1.0), ((0, 1, 0), 0.5), ((0, 0, 1), 0.0), ((0, -0.9, -0.4), 0.5)])
+    known = np.array([True, False, True, False])
+    pairs = np.array([[0, 1], [1, 2], [0, 3]])
+    head = np.full(4, FILL_GROUPS.index("head"))
+    axes = Orientation(normals, np.array([0.0, 0.0, 1.0]), np.array([0.0, -1.0, 0.0]))
+    plain = fill_unseen(values, known, pairs, head, centers, 1)
+    assert plain.values[1, 0] == pytest.approx(0.5)  # between skin and hair
+    res = fill_unseen(values, known, pairs, head, centers, 1, orientation=axes)
+    assert res.values[1, 0] == pytest.approx(0.0)  # the crown's hair
+    assert res.values[3, 0] == pytest.approx(1.0)  # the face's underside stays skin: it faces forward
+
+
+def test_an_unseen_face_takes_its_mirror_faces_value():
+    values = np.array([[0.2], [9.0], [9.0], [0.8]])
+    known = np.array([True, False, False, True])
+    mirror = np.array([3, 2, 1, 0])  # 0 <-> 3 and 1 <-> 2; neither of 1, 2 was seen
+    res = fill_unseen(values, known, CHAIN[:3], np.zeros(4, int), _centers(4), 1)
+    assert res.how.tolist() == [0, 1, 1, 0]
+    mirror[[1, 2]] = [0, 3]  # now 1 mirrors 0 and 2 mirrors 3 (a one-way map is enough here)
+    res = fill_unseen(values, known, CHAIN[:3], np.zeros(4, int), _centers(4), 1, mirror_of=mirror)
+    np.testing.assert_allclose(res.values[:, 0], [0.2, 0.2, 0.8, 0.8])
+    assert res.how.tolist() == [0, 4, 4, 0] and res.summary()["mirror"] == 0.5
 
 
 def test_fill_groups_split_the_body_without_overlap():
@@ -147,6 +198,19 @@ def test_fill_gives_the_back_the_colour_of_its_garment(anny_body, tmp_path):
     again = Avatar.load(avatar.save(tmp_path / "filled.gma"), anny_body)
     assert torch.equal(again.face_seen, avatar.face_seen)
     assert torch.equal(Selection.unseen(again).faces, torch.nonzero(seen < SEEN).reshape(-1))
+
+
+def test_untrained_faces_are_those_the_fit_never_changed(anny_body):
+    from gma.avatar import Avatar, AvatarConfig
+    from gma.edit.unseen import default_colour_faces, initial_features, untrained_faces
+
+    avatar = Avatar.create(AvatarConfig(feature_dim=8, fine_per_face=1, hidden=16), anny_body, seed=3)
+    start = initial_features(avatar, seed=3)
+    assert untrained_faces(avatar.model, start).all() and default_colour_faces(avatar.model, start).all()
+    with torch.no_grad():
+        avatar.model.f_tex[:5] += 1.0
+    assert untrained_faces(avatar.model, start).sum() == avatar.model.num_faces - 5
+    assert not untrained_faces(avatar.model, initial_features(avatar, seed=4)).any()  # another start
 
 
 def test_unseen_selection_needs_the_record(anny_body):
@@ -251,3 +315,37 @@ def test_fit_of_a_one_sided_clip_records_and_fills_the_rest(frame, facing, anny_
     painted = tmp_path / "painted.gma"
     assert main(["edit", str(out), "-o", str(painted), "--select", "unseen", "--paint", "#2040c0"]) == 0
     assert torch.equal(Avatar.load(painted, anny_body).face_seen, avatar.face_seen)  # edits keep the record
+
+
+@pytest.mark.slow
+def test_fit_of_an_upper_body_clip_fills_the_legs(anny_body, gpu, tmp_path, capsys):
+    """A clip that shows only the upper body (the frames cut below the hips): the fit goes through, the
+    legs are guessed from what was seen (across groups: their own group part showed nothing), no unseen
+    face is left as it was, and ``gma fit`` says so."""
+    import json
+
+    import imageio.v3 as iio
+
+    from gma.avatar import Avatar
+    from gma.cli import main
+    from gma.edit.unseen import SEEN
+    from gma.synth.generate import SynthConfig, synthesize
+
+    cfg = SynthConfig(width=48, height=48, train_frames=4, test_pose_frames=1, test_view_frames=1, supersample=1,
+                      texture_size=128)
+    seq = synthesize(tmp_path / "seq", cfg, ctx=gpu, body=anny_body, progress=False)
+    for path in [*seq.image_paths, *seq.mask_paths]:
+        iio.imwrite(path, iio.imread(path)[:20])  # the top rows: head and chest, no legs
+    cams = json.loads((seq.root / "cameras.json").read_text())
+    (seq.root / "cameras.json").write_text(json.dumps({**cams, "height": 20}))  # same K: the rows kept stay put
+    out = tmp_path / "me.gma"
+    assert main(["fit", str(seq.root), "-o", str(out), "--quiet", "--resolution", "48", "--stage1-steps", "2",
+                 "--stage2-steps", "2", "--preview-every", "0", "--avatar.feature-dim", "8",
+                 "--avatar.fine-per-face", "1"]) == 0
+    printed = capsys.readouterr().out
+    assert "never seen well" in printed and "no frame showed at all" in printed
+    avatar = Avatar.load(out, anny_body)
+    legs = anny_body.region_mask("legs")
+    assert float((avatar.face_seen[legs] < SEEN).float().mean()) > 0.95
+    filled = avatar.info["unseen"]["filled"]
+    assert avatar.info["unseen"]["guessed"]["area"] > 0.4 and filled["across_groups"] > 0 and filled["left"] == 0

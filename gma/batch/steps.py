@@ -23,6 +23,7 @@ from gma.batch.config import BatchConfig, Person
 from gma.body import load_body
 from gma.core.atomic import atomic_write_bytes
 from gma.data import read_sequence
+from gma.edit.unseen import AfterFit
 from gma.gpu import get_context
 from gma.train.config import FitConfig
 from gma.train.evaluate import EVAL_SPLITS, evaluate_splits
@@ -30,7 +31,7 @@ from gma.train.outputs import CHECKPOINT_NAME, prepare_fit_outputs
 from gma.train.trainer import Trainer, work_dir
 from gma.video import VideoImportConfig, estimate_sequence
 
-__all__ = ["OUTPUTS", "STEPS", "PersonJob", "StepSkipped", "worker_body", "worker_context"]
+__all__ = ["OUTPUTS", "STEPS", "PersonJob", "StepSkipped", "guessed_facts", "worker_body", "worker_context"]
 
 
 class StepSkipped(Exception):
@@ -90,20 +91,32 @@ def _checkpoint_step(checkpoint: Path) -> int:
 
 
 def fit_step(job: PersonJob) -> dict:
-    """``gma fit SEQ -o avatar.gma --resume`` (with ``--decoders`` in phase 2 of a shared-decoder batch),
-    or, for a person of the decoder subset, the avatar that phase 1 fitted."""
+    """``gma fit SEQ -o avatar.gma --resume`` (the fill of the unseen faces included; with ``--decoders`` in
+    phase 2 of a shared-decoder batch), or, for a person of the decoder subset, the avatar that phase 1
+    fitted (and filled)."""
     out = job.avatar_path
     if job.shared_avatar is not None:
         atomic_write_bytes(out, Path(job.shared_avatar).read_bytes())
-        return {"decoders": "trained here (phase 1)", "avatar_bytes": out.stat().st_size}
+        return {"decoders": "trained here (phase 1)", "avatar_bytes": out.stat().st_size,
+                **guessed_facts(_avatar(job))}
     seq = job.sequence()
     resumed = _checkpoint_step(work_dir(out) / CHECKPOINT_NAME)
     prepare_fit_outputs(out, [seq], resume=True)  # a batch always continues what an earlier run began
     trainer = Trainer(job.fit, seq, out, body=worker_body(job.fit.avatar.body), ctx=worker_context(),
-                      progress=False)
+                      progress=False, finish=AfterFit(worker_context()))
     avatar = trainer.run(resume=True)
     return {"steps": avatar.info["steps"], "resumed_from": resumed, "fit_seconds": avatar.info["fit_seconds"],
-            "decoders": job.fit.decoders or "own", "avatar_bytes": out.stat().st_size}
+            "decoders": job.fit.decoders or "own", "avatar_bytes": out.stat().st_size, **guessed_facts(avatar)}
+
+
+def guessed_facts(avatar) -> dict:
+    """How much of a fitted avatar the frames never showed and the fill guessed (``gma fit`` prints the
+    same): shares of the body surface and of the faces; nothing for an avatar fitted with
+    ``--fill-unseen false``."""
+    unseen = avatar.info.get("unseen")
+    if not unseen:
+        return {}
+    return {"guessed_area": unseen["guessed"]["area"], "guessed_faces": unseen["guessed"]["faces"]}
 
 
 def _avatar(job: PersonJob):

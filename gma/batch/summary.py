@@ -1,5 +1,6 @@
 """The batch's summary table, one row per person (status, time, novel-view PSNR where the sequence has
-that split, avatar file size), as ``OUT/summary.csv`` and ``OUT/summary.md``, both written atomically."""
+that split, avatar file size, the share of the body surface no frame showed well and the fit guessed),
+as ``OUT/summary.csv`` and ``OUT/summary.md``, both written atomically."""
 
 from __future__ import annotations
 
@@ -12,8 +13,8 @@ from gma.core.atomic import atomic_write_bytes
 
 __all__ = ["COLUMNS", "format_markdown", "summary_rows", "write_summary"]
 
-COLUMNS = ("person", "status", "seconds", "novel_view_psnr", "novel_pose_psnr", "avatar_mb", "resumed_from",
-           "error")
+COLUMNS = ("person", "status", "seconds", "novel_view_psnr", "novel_pose_psnr", "avatar_mb", "guessed_pct",
+           "resumed_from", "error")
 
 
 def summary_rows(out: Path, jobs: list) -> list[dict]:
@@ -26,8 +27,13 @@ def summary_rows(out: Path, jobs: list) -> list[dict]:
         rows.append({"person": job.person.name, "status": st["state"], "seconds": round(st.get("seconds", 0.0), 1),
                      "novel_view_psnr": ev.get("test_view_psnr"), "novel_pose_psnr": ev.get("test_pose_psnr"),
                      "avatar_mb": round(avatar.stat().st_size / 2**20, 3) if avatar.is_file() else None,
-                     "resumed_from": fit.get("resumed_from"), "error": st.get("error")})
+                     "guessed_pct": _percent(fit.get("guessed_area")), "resumed_from": fit.get("resumed_from"),
+                     "error": st.get("error")})
     return rows
+
+
+def _percent(share: float | None) -> float | None:
+    return None if share is None else round(100 * share, 1)
 
 
 def _cell(value) -> str:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from gma.batch.status import TaskStatus
 from gma.batch.steps import OUTPUTS, STEPS, PersonJob, StepSkipped, worker_body, worker_context
+from gma.edit.unseen import AfterFit
 from gma.train.config import FitConfig
 from gma.train.outputs import prepare_fit_outputs
 from gma.train.trainer import Trainer, subject_outputs
@@ -102,7 +103,7 @@ def run_shared_decoders(jobs: list[PersonJob]) -> dict:
         fit = phase1_config(jobs[0].fit, len(jobs))
         prepare_fit_outputs(target, seqs, resume=True)
         trainer = Trainer(fit, seqs if len(seqs) > 1 else seqs[0], target, body=worker_body(fit.avatar.body),
-                          ctx=worker_context(), progress=False)
+                          ctx=worker_context(), progress=False, finish=AfterFit(worker_context()))
         trainer.run(resume=True)
         avatars = {name: str(p) for name, p in zip(names, subject_outputs(target, [s.root for s in seqs]), strict=True)}
         status.data.update(avatars=avatars, decoders=str(decoders))

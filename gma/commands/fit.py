@@ -37,6 +37,15 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _across_note(filled: dict | None) -> str:
+    """The clause on body parts the frames showed nothing of (a clip of the upper body only: the legs)."""
+    share = (filled or {}).get("across_groups", 0.0) + (filled or {}).get("by_mean", 0.0)
+    if share <= 0:
+        return ""
+    return (f"; {100 * share:.0f} % of the faces lie on body parts no frame showed at all and took the colours "
+            "of the nearest parts that were seen")
+
+
 def run(args: argparse.Namespace) -> int:
     from gma.commands._openmp_workers import openmp_workers_asleep
     from gma.commands._options import collect_overrides
@@ -65,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         if "unseen" in sub.avatar.info:
             g = sub.avatar.info["unseen"]["guessed"]
             print(f"{sub.out}: {100 * g['area']:.0f} % of the body surface ({100 * g['faces']:.0f} % of the faces) was "
-                  "never seen well by the frames and was filled in from the seen faces (gma edit --select unseen)")
+                  "never seen well by the frames and was filled in from the seen faces (gma edit --select unseen)"
+                  + _across_note(sub.avatar.info["unseen"].get("filled")))
         if sub.poses is not None:
             r = sub.avatar.info["pose_refinement"]
             print(f"refined poses of {sub.seq.root} in {refined_body_path(sub.out)} (mean correction "

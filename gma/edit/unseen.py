@@ -6,10 +6,12 @@ face's normal and the direction to the camera (a face seen at a grazing angle sa
 colour). :func:`seen_score` maps that to [0, 1], saved in the ``.gma`` as ``face_seen``; a face under 0.5
 (:data:`SEEN`) is "unseen" (``gma edit --select unseen``, ``gma eval``'s seen / guessed picture).
 
-:func:`fill_unseen_faces` is the step after a fit: the decoded colours of the unseen faces are filled
-from the seen ones (:func:`gma.avatar.fill.fill_unseen`: over the surface within body-part groups, plus
-a front-to-back prior for the garments), then turned into ordinary features by the same solve as paint
-(:func:`gma.edit.paint.paint_features`), so paint, stamp and transfer work on them like on any face.
+:func:`fill_unseen_faces` is the step after a fit: the decoded colours of the faces not seen well are
+filled from the faces seen well (:func:`gma.avatar.fill.fill_unseen`: from the mirror face, over the
+surface within body-part groups, a front-to-back prior per group, the crown for the back of the head),
+then turned into ordinary features by the same solve as paint (:func:`gma.edit.paint.paint_features`), so
+paint, stamp and transfer work on them like on any face. :func:`untrained_faces` and
+:func:`default_colour_faces` count what a fit left at its starting features (``benchmarks/unseen_real.py``).
 """
 
 from __future__ import annotations
@@ -20,21 +22,22 @@ from collections.abc import Iterable
 import numpy as np
 import torch
 
-from gma.avatar.fill import fill_groups, fill_unseen
+from gma.avatar.fill import FRONT_BACK, Orientation, fill_groups, fill_unseen
 from gma.body.geometry import face_adjacency, face_centers, mirror_faces
 from gma.core.camera import Camera
 from gma.edit.errors import EditError
 from gma.edit.paint import paint_features
 
-__all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "SOURCE", "AfterFit", "depth_axis", "face_areas", "fill_unseen_faces",
-           "guessed_share", "observe_faces", "projected_areas", "seen_picture", "seen_score", "unseen_mask"]
+__all__ = ["ID_RESOLUTION", "SEEN", "SEEN_COVER", "SOURCE", "AfterFit", "body_orientation", "default_colour_faces",
+           "depth_axis", "face_areas", "fill_unseen_faces", "guessed_share", "initial_features", "observe_faces",
+           "projected_areas", "seen_picture", "seen_score", "unseen_mask", "untrained_faces"]
 
 # A face's summed cover (:func:`observe_faces`) at which its seen score is 1 - 1/e: half of it seen in one
 # frame head-on. Below SEEN (a cover of 0.35) the fit had little to learn the face's colour from.
 SEEN_COVER = 0.5
 SEEN = 0.5
-# Faces the fill takes values from: seen well (a summed cover of 0.8). A face seen only obliquely keeps its
-# own colour but lends it to no one: the fit blends such faces with the background at the silhouette.
+# Faces the fill keeps and takes values from: seen well (a summed cover of 0.8). The others are filled, those
+# seen only at a grazing angle included: the fit blends such faces with the background at the silhouette.
 SOURCE = 0.8
 # Face-ID renders are made at least this large (longest side, pixels), whatever the fit's resolution, so
 # that faces smaller than a fitting pixel are still found where they show.
@@ -108,6 +111,33 @@ def guessed_share(avatar, body) -> dict:
             "area": round(float(area[unseen].sum() / area.sum().clamp_min(1e-12)), 4)}
 
 
+def initial_features(avatar, seed: int) -> torch.Tensor:
+    """[F, k] the texture features ``avatar`` had before its fit (``gma fit --seed``; the trainer starts
+    subject i of a multi-person fit at seed + i)."""
+    from gma.avatar.model import AvatarModel
+
+    model = avatar.model
+    return AvatarModel(model.config, model.faces, avatar.rest_vertices, seed=seed).f_tex.detach()
+
+
+def untrained_faces(model, start: torch.Tensor) -> np.ndarray:
+    """[F] bool: the faces of ``model`` whose texture features are still exactly ``start`` [F, k]
+    (:func:`initial_features`): no step of the fit and no fill changed them, so they decode to the
+    untrained default colour."""
+    return (model.f_tex.detach() == start).all(1).numpy()
+
+
+@torch.no_grad()
+def default_colour_faces(model, start: torch.Tensor, tolerance: float = 0.02) -> np.ndarray:
+    """[F] bool: the faces of ``model`` whose decoded colours lie within ``tolerance`` (0-1, every surfel
+    and channel) of what its decoders make of the features ``start`` [F, k] (:func:`initial_features`):
+    faces the fit left at the untrained default colour (the grey of a never-seen back)."""
+    nk = model.config.fine_per_face
+    _, now, _ = model.fine_outputs()
+    default = torch.sigmoid(model.T_color(torch.cat([start, model.pe], -1))).reshape(-1, nk, 3)
+    return ((now - default).abs().amax((1, 2)) <= tolerance).numpy()
+
+
 def depth_axis(rest_vertices: torch.Tensor) -> int:
     """The body's front-back axis in its rest frame: not x (left-right, the mirror plane's normal) and not
     the longest extent (up)."""
@@ -116,14 +146,26 @@ def depth_axis(rest_vertices: torch.Tensor) -> int:
     return 3 - up  # of the axes 1 and 2, the one that is not up
 
 
+def body_orientation(rest_vertices: torch.Tensor, faces: torch.Tensor, up_axis: str) -> Orientation:
+    """The rest-pose face normals and the body's up and forward axes (forward = left x up with left +x:
+    Anny's -y, SMPL-X's +z) for the crown prior of :func:`gma.avatar.fill.fill_unseen`."""
+    v = rest_vertices.double()
+    f = faces.long()
+    normals = torch.linalg.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    up = np.eye(3)[{"x": 0, "y": 1, "z": 2}[up_axis]]
+    return Orientation(torch.nn.functional.normalize(normals, dim=-1).numpy(), up, np.cross(np.eye(3)[0], up))
+
+
 @torch.no_grad()
-def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, front_back: float = 0.5,
-                      source: float = SOURCE) -> dict:
-    """Store ``seen`` [F] (:func:`seen_score`) in ``avatar.face_seen`` and give the faces it marks unseen
-    new ``f_tex``, solved so they decode to colours filled from the seen faces. ``mirror``: a face whose
-    left-right mirror was seen counts as known and keeps its features (the fit's symmetry prior taught
-    them from its mirror). ``front_back``: weight of the front-to-back prior (:mod:`gma.avatar.fill`).
-    Returns a summary, also written to ``avatar.info["unseen"]``."""
+def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, front_back=None,
+                      source: float = SOURCE, crown: bool = True) -> dict:
+    """Store ``seen`` [F] (:func:`seen_score`) in ``avatar.face_seen`` and give the faces not seen well (a
+    score under ``source``: the unseen ones, and those seen only at a grazing angle, whose colour the fit
+    blended with the background at the silhouette) new ``f_tex``, solved so they decode to colours filled
+    from the faces seen well. ``mirror``: such a face whose left-right mirror was seen well takes its
+    mirror's colour. ``front_back``: weights of the front-to-back prior (:mod:`gma.avatar.fill`; default
+    its ``FRONT_BACK``); ``crown``: the crown prior of the head (off: an ablation). Returns a summary, also
+    written to ``avatar.info["unseen"]``."""
     model = avatar.model
     if model.direct:
         raise EditError("a 'direct' avatar has no features to fill")
@@ -131,26 +173,28 @@ def fill_unseen_faces(avatar, body, seen: torch.Tensor, mirror: bool = True, fro
     if tuple(seen.shape) != (model.num_faces,) or not bool(torch.isfinite(seen).all()):
         raise ValueError(f"seen must be [{model.num_faces}] finite values, got {list(seen.shape)}")
     avatar.face_seen = seen.clamp(0, 1)
-    known, sources = (seen >= SEEN).numpy(), (seen >= source).numpy()
+    mirror_of = None
     if mirror:
         try:
             mirror_of = mirror_faces(avatar.rest_vertices, body.faces).numpy()
-            known, sources = known | known[mirror_of], sources | sources[mirror_of]
         except ValueError:
             pass  # a body mesh without left-right symmetry: no mirror knowledge, the fill does it all
+    orientation = body_orientation(avatar.rest_vertices, body.faces, body.up_axis) if crown else None
     nk = model.config.fine_per_face
     _, colors, _ = model.fine_outputs()
-    result = fill_unseen(colors.reshape(model.num_faces, nk * 3).double().numpy(), known,
+    result = fill_unseen(colors.reshape(model.num_faces, nk * 3).double().numpy(), (seen >= source).numpy(),
                          face_adjacency(body.faces.long()).numpy(), fill_groups(body.regions),
                          face_centers(avatar.rest_vertices.double(), body.faces).numpy(),
-                         depth_axis(avatar.rest_vertices), front_back, sources=sources)
+                         depth_axis(avatar.rest_vertices), front_back, mirror_of=mirror_of,
+                         orientation=orientation)
     ids = torch.as_tensor(np.nonzero(result.how > 0)[0], dtype=torch.long)
     if len(ids):
         target = torch.as_tensor(result.values[ids.numpy()], dtype=torch.float32).reshape(-1, nk, 3)
         feats, _ = paint_features(model, ids, target.clamp(0, 1))
         model.f_tex[ids] = feats
-    summary = {"guessed": guessed_share(avatar, body), "filled": result.summary(), "front_back": front_back,
-               "mirror": bool(mirror)}
+    summary = {"guessed": guessed_share(avatar, body), "filled": result.summary(),
+               "front_back": front_back if front_back is not None else dict(FRONT_BACK), "mirror": bool(mirror),
+               "crown": bool(crown)}
     avatar.info["unseen"] = summary
     return summary
 
@@ -160,8 +204,8 @@ class AfterFit:
     each face with face-ID renders, stores it in the avatar and, with ``fill``, fills the unseen faces
     (:func:`fill_unseen_faces`). ``ctx``: the GPU context (default: the shared one, made on first use)."""
 
-    def __init__(self, ctx=None, fill: bool = True, front_back: float = 0.5, source: float = SOURCE):
-        self.ctx, self.fill, self.front_back, self.source = ctx, fill, front_back, source
+    def __init__(self, ctx=None, fill: bool = True, front_back=None, source: float = SOURCE, crown: bool = True):
+        self.ctx, self.fill, self.front_back, self.source, self.crown = ctx, fill, front_back, source, crown
         self._renderer = None
 
     def _renderer_for(self, body):
@@ -176,7 +220,7 @@ class AfterFit:
     def __call__(self, avatar, body, meshes, mirror: bool = True) -> dict:
         seen = seen_score(observe_faces(self._renderer_for(body), body.faces, meshes))
         if self.fill:
-            return fill_unseen_faces(avatar, body, seen, mirror, self.front_back, self.source)
+            return fill_unseen_faces(avatar, body, seen, mirror, self.front_back, self.source, self.crown)
         avatar.face_seen = seen
         avatar.info["unseen"] = summary = {"guessed": guessed_share(avatar, body), "filled": None}
         return summary
