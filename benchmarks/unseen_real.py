@@ -19,7 +19,7 @@ back (beyond 150 deg; their poses as imported, not refined by the fit); also ``-
 An import or a fit already in ``--work`` is reused; ``--imported`` takes an existing ``gma import video``
 of the clip instead of importing it again.
 
-    PYTHONPATH=. python benchmarks/unseen_real.py [--imported FOLDER] [--work out/bench_unseen_real]
+    python benchmarks/unseen_real.py [--imported FOLDER] [--work out/bench_unseen_real]
 """
 
 from __future__ import annotations

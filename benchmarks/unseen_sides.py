@@ -16,7 +16,7 @@ prior of the head (``--no-crown``, one more fill with the first weight).
 Writes a table (stdout and ``--work``/results.json) and ``--figure``: a back view, ground truth | before |
 after (the first weight). A fit already finished in ``--work`` is reused.
 
-    PYTHONPATH=. python benchmarks/unseen_sides.py --size 160 --frames 36 --steps 120 240
+    python benchmarks/unseen_sides.py --size 160 --frames 36 --steps 120 240
 """
 
 from __future__ import annotations

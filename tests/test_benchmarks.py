@@ -59,6 +59,8 @@ SMOKE: dict[str, list[str] | str] = {
     "video_masks.py": ["--work", "{tmp}/work"],
     "video_hdr.py": ["--work", "{tmp}/work", "--figure", "{tmp}/hdr.png"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
+    "unseen_real.py": "needs the iPER clip and a quick fit: python benchmarks/unseen_real.py",
+    "closeups.py": "needs two fitted avatars of one sequence: python benchmarks/closeups.py SEQ A B --out X.png",
     "web_export.py": "needs Debian's chromium and minutes of software WebGL; tests/test_web_export.py covers "
                      "the page in a browser: python benchmarks/web_export.py",
     "report.py": "runs the other scripts; test_report_names_machine_commit_and_command runs it small",
