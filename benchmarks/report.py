@@ -8,6 +8,7 @@ and each script's own output.
     python benchmarks/report.py --gpu           # the same set on a hardware GPU (GMA_ADAPTER=gpu)
     python benchmarks/report.py --quick         # tiny sizes: checks that the report is made, figures mean nothing
     python benchmarks/report.py --only render peer --out /tmp/results.md
+    python benchmarks/report.py --only web --update   # rerun one row, keep the others of the last report
 
 A row whose prerequisite is missing (gsplat for the peer ratio, MediaPipe for the video) says so instead
 of a figure; a script that fails leaves its exit status and last lines in the report, and the others run.
@@ -173,6 +174,17 @@ class Outcome:
     output: str = ""
     figures: list[tuple[str, str]] = dataclasses.field(default_factory=list)
     seconds: float = 0.0
+    ran: str = ""                    # when, at which commit and load (set by main)
+
+    def to_json(self) -> dict:
+        return {"name": self.bench.name, "command": self.command, "status": self.status, "output": self.output,
+                "figures": [list(f) for f in self.figures], "seconds": self.seconds, "ran": self.ran}
+
+    @staticmethod
+    def from_json(d: dict) -> Outcome:
+        bench = next(b for b in BENCHES if b.name == d["name"])
+        return Outcome(bench, d["command"], d["status"], d["output"], [tuple(f) for f in d["figures"]],
+                       d["seconds"], d["ran"])
 
 
 def run_bench(bench: Bench, quick: bool, env: dict[str, str]) -> Outcome:
@@ -243,8 +255,9 @@ def render_markdown(header: list[str], outcomes: list[Outcome], quick: bool) -> 
         if o.status == "ok" and not o.figures:
             lines.append(f"| {o.bench.title} | see below |")
     for o in outcomes:
-        lines += ["", f"## {o.bench.title}", "", f"`{o.command}`" + (f" ({o.seconds:.0f} s)" if o.seconds else ""),
-                  ""]
+        took = f"{o.seconds:.0f} s" if o.seconds else ""
+        when = ", ".join(x for x in (took, o.ran and f"run {o.ran}") if x)
+        lines += ["", f"## {o.bench.title}", "", f"`{o.command}`" + (f" ({when})" if when else ""), ""]
         if o.status != "ok":
             lines += [o.status, ""]
         if o.output:
@@ -259,6 +272,9 @@ def parse_args(argv):
     ap.add_argument("--gpu", action="store_true", help="run on a hardware GPU (refused when there is none)")
     ap.add_argument("--only", nargs="+", metavar="NAME", help=f"run only these of {', '.join(NAMES)}")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="the report (default benchmarks/RESULTS.md)")
+    ap.add_argument("--update", action="store_true",
+                    help="with --only: keep the other rows of the report already in --out (from its .json beside "
+                         "it, made on this machine); each section says when it ran")
     args = ap.parse_args(argv)
     unknown = sorted(set(args.only or []) - set(NAMES))
     if unknown:
@@ -267,7 +283,26 @@ def parse_args(argv):
         ap.exit(2, f"{args.out}: not a file\n")
     if not args.out.parent.is_dir():
         ap.exit(2, f"{args.out}: its folder does not exist\n")
+    if args.update and not args.only:
+        ap.exit(2, "--update: name the rows to run again with --only\n")
+    if args.update and not args.out.with_suffix(".json").is_file():
+        ap.exit(2, f"{args.out.with_suffix('.json')}: no earlier report to update (run without --update first)\n")
     return args
+
+
+def earlier_outcomes(path: Path, header: list[str]) -> list[Outcome]:
+    """The outcomes of the report whose record is ``path``; refused when it ran on another machine or
+    adapter than ``header`` names (figures of two machines do not belong in one file)."""
+    try:
+        record = json.loads(path.read_text())
+        machine = [h for h in record["header"] if h.startswith(("- machine:", "- adapter:"))]
+        outcomes = [Outcome.from_json(d) for d in record["outcomes"]]
+    except (OSError, ValueError, KeyError, TypeError, StopIteration) as e:
+        raise SystemExit(f"{path}: not a report record ({e})") from None
+    here = [h for h in header if h.startswith(("- machine:", "- adapter:"))]
+    if [h.split(";")[0] for h in machine] != [h.split(";")[0] for h in here]:
+        raise SystemExit(f"{path}: made on another machine or adapter; run the whole report here instead")
+    return outcomes
 
 
 def main(argv=None) -> int:
@@ -288,15 +323,24 @@ def main(argv=None) -> int:
     started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     header = [f"- command: `{command}`", f"- commit: {commit()}", f"- date: {started}", *machine_lines(adapter)]
     outcomes = []
+    ran = f"{started}, commit {header[1].removeprefix('- commit: ')}, load {os.getloadavg()[0]:.2f}"
     for bench in BENCHES:
         if args.only and bench.name not in args.only:
             continue
         print(f"{bench.name}: {bench.script} ...", flush=True)
         outcome = run_bench(bench, args.quick, env)
+        outcome.ran = ran
         print(f"{bench.name}: {outcome.status}" + (f" ({outcome.seconds:.0f} s)" if outcome.seconds else ""),
               flush=True)
         outcomes.append(outcome)
+    record = args.out.with_suffix(".json")
+    if args.update:
+        fresh = {o.bench.name: o for o in outcomes}
+        kept = {o.bench.name: o for o in earlier_outcomes(record, header)}
+        outcomes = [fresh.get(b.name) or kept[b.name] for b in BENCHES if b.name in fresh or b.name in kept]
     atomic_write_bytes(args.out, render_markdown(header, outcomes, args.quick).encode())
+    atomic_write_bytes(record, json.dumps({"header": header, "outcomes": [o.to_json() for o in outcomes]},
+                                          indent=1).encode())
     print(f"wrote {args.out}")
     return 0
 
