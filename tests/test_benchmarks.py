@@ -246,7 +246,10 @@ def test_report_names_machine_commit_and_command(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [(["--only", "nothing"], "--only nothing: no such benchmark"),
-                                           (["--out", "/no/such/folder/R.md"], "its folder does not exist")])
+                                           (["--out", "/no/such/folder/R.md"], "its folder does not exist"),
+                                           (["--update"], "name the rows to run again with --only"),
+                                           (["--only", "web", "--update", "--out", "R.md"],
+                                            "R.json: no earlier report to update")])
 def test_report_refuses_bad_arguments_before_running_anything(tmp_path, args, message):
     run = subprocess.run([sys.executable, str(BENCH / "report.py"), "--quick", *args], cwd=tmp_path,
                          capture_output=True, text=True, timeout=120, env=dict(os.environ, PYTHONPATH=str(REPO)))
