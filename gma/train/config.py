@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, fields
 
 from gma.avatar.config import AvatarConfig, doc
 
-__all__ = ["PRESETS", "FitConfig", "LossWeights", "PoseRefineConfig", "preset"]
+__all__ = ["PRESETS", "FitConfig", "FrameColourConfig", "LossWeights", "PoseRefineConfig", "preset"]
 
 TRAINING_MODES = ("two_stage", "one_stage")
 REFINE_MODES = ("auto", "on", "off")
@@ -78,6 +78,21 @@ class PoseRefineConfig:
             raise ValueError(f"--pose.bones: expected one of {BONE_SET_NAMES}, got {self.bones!r}")
 
 
+@dataclass
+class FrameColourConfig:
+    """Per-frame colour transforms learnt with the avatar (``--colour.*``, gma.train.appearance)."""
+
+    refine: str = doc("auto", "auto (on for sequences from 'gma import video': a phone changes exposure and white "
+                              "balance while filming), on, or off. A gain and an offset per channel and frame, "
+                              "discarded with the fit; held-out frames get theirs at test-time pose fitting")
+    lr: float = doc(0.005, "Adam learning rate of the gains and offsets")
+    prior: float = doc(0.01, "pull toward identity: weight of the squared gains and offsets")
+
+    def __post_init__(self):
+        if self.refine not in REFINE_MODES:
+            raise ValueError(f"--colour.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
+
+
 def _stage2_weights() -> LossWeights:
     return LossWeights(lap=100.0, edge=10.0, normal=0.0, lpips=0.02)
 
@@ -107,6 +122,10 @@ class FitConfig:
                                   "(gma fit, gma demo)")
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
+    colour_edge: float = doc(0.0, "pixels over which the colour loss's weight rises from 0 at the person mask's "
+                                  "boundary to 1 inside; outside the mask it is 0, so a surfel straying there "
+                                  "learns no background colour and the mask loss alone keeps the outline "
+                                  "(0: the colour loss over the whole image)")
     cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (about half the surfels)")
     threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is the safe choice on a small or shared CPU: "
                             "more threads are faster on idle cores but slower beside other busy processes, as "
@@ -124,6 +143,8 @@ class FitConfig:
                                              metadata={"doc": "the representation"})
     pose: PoseRefineConfig = dataclasses.field(default_factory=PoseRefineConfig,
                                                metadata={"doc": "per-frame pose corrections"})
+    colour: FrameColourConfig = dataclasses.field(default_factory=FrameColourConfig,
+                                                  metadata={"doc": "per-frame colour transforms"})
 
     def __post_init__(self):
         if self.training not in TRAINING_MODES:
@@ -148,7 +169,7 @@ class FitConfig:
     def from_dict(d: dict) -> FitConfig:
         d = dict(d)
         for name, cls in (("weights1", LossWeights), ("weights2", LossWeights), ("avatar", AvatarConfig),
-                          ("pose", PoseRefineConfig)):
+                          ("pose", PoseRefineConfig), ("colour", FrameColourConfig)):
             if name in d and isinstance(d[name], dict):
                 d[name] = cls(**d[name])
         known = {f.name for f in fields(FitConfig)}

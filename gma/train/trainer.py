@@ -29,10 +29,11 @@ from gma.body import load_body
 from gma.core.atomic import atomic_write_json
 from gma.core.errors import NonFiniteError
 from gma.render.image_io import save_png
+from gma.train.appearance import FrameColour, colour_wanted, colour_weights, weighted_picture_loss
 from gma.train.checkpoint import load_checkpoint, save_checkpoint
 from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
-from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
+from gma.train.losses import GeometryTerms, load_lpips, normal_consistency
 from gma.train.metrics import psnr
 from gma.train.pose_refine import BONE_SETS, PoseCorrections, fit_corrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
@@ -87,6 +88,8 @@ class Subject:
     avatar: Avatar
     out: Path
     poses: PoseCorrections | None = None  # learnt pose corrections (sequences with estimated poses)
+    colours: FrameColour | None = None  # learnt per-frame colour transforms (sequences from a video)
+    weights: torch.Tensor | None = None  # [T, H, W, 1] colour-loss weight of each pixel (--colour-edge)
 
 
 def subject_outputs(out: Path, roots: list) -> list[Path]:
@@ -110,7 +113,8 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False}
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False,
+                       "colour_edge": 0.0, "colour.refine": "off", "colour.lr": 0.005, "colour.prior": 0.01}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -181,7 +185,8 @@ class Trainer:
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
                 avatar.model.share_decoders_with(self.subjects[0].avatar.model)
-            self.subjects.append(Subject(o.stem, s, frames, avatar, o))
+            weights = colour_weights(frames.masks, cfg.colour_edge) if cfg.colour_edge > 0 else None
+            self.subjects.append(Subject(o.stem, s, frames, avatar, o, weights=weights))
         first = self.subjects[0]
         self.seq, self.frames, self.avatar, self.model = first.seq, first.frames, first.avatar, first.avatar.model
         self.models = [s.avatar.model for s in self.subjects]
@@ -229,6 +234,10 @@ class Trainer:
             shift = [p for ps in self.pose_sets for p in ps.translation_params()]
             param_groups += [{"params": rot, "lr": pc.lr_rotation, "base_lr": pc.lr_rotation},
                              {"params": shift, "lr": pc.lr_translation, "base_lr": pc.lr_translation}]
+        if self.colour_sets:  # so do the per-frame colour transforms
+            lr = self.cfg.colour.lr
+            param_groups.append({"params": [p for cs in self.colour_sets for p in cs.parameters()], "lr": lr,
+                                 "base_lr": lr})
         return torch.optim.Adam(param_groups, eps=1e-15)
 
     def _symmetry_prior(self, frames: FrameSet) -> SymmetryPrior | None:
@@ -293,10 +302,13 @@ class Trainer:
                                   bones=bones)
         t2 = time.perf_counter()
         target = frames.target(t, cfg.background)
-        l1, dssim = picture_loss(out.color, target)
+        colours = self.subjects[subject].colours
+        color = out.color if colours is None else colours.apply(t, out.color, out.alpha, cfg.background)
+        weights = self.subjects[subject].weights
+        l1, dssim = weighted_picture_loss(color, target, None if weights is None else weights[t])
         terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - frames.masks[t]).abs().mean()}
         if w.lpips > 0 and self.lpips is not None:
-            terms["lpips"] = self.lpips(out.color, target)
+            terms["lpips"] = self.lpips(color, target)
         offsets = dec.vertex_offsets
         if w.lap > 0:
             terms["lap"] = self.geo.laplacian(offsets)
@@ -313,10 +325,13 @@ class Trainer:
         if poses is not None and learn_poses:  # its weights are in cfg.pose, not the stage's
             terms["pose_reg"] = poses.regulariser(t, cfg.pose)
             loss = loss + terms["pose_reg"]
+        if colours is not None:
+            terms["colour_reg"] = colours.regulariser(t)
+            loss = loss + cfg.colour.prior * terms["colour_reg"]
         timers["decode"] += t1 - t0
         timers["posing_render_fwd"] += t2 - t1
         rec = {k: float(v.detach()) for k, v in terms.items()}
-        rec["psnr"] = psnr(out.color.detach(), target)
+        rec["psnr"] = psnr(color.detach(), target)
         if len(self.subjects) > 1:
             rec["subject"] = subject
         return loss, rec, marks
@@ -336,7 +351,8 @@ class Trainer:
             with torch.no_grad():
                 decoded = model.decode(stage.layer)
             fit_corrections(sub.poses, decoded, self.body, sub.frames, self.cfg.pose.align, self.cfg.pose,
-                            self.cfg.background, self.ctx, self.progress, desc="align poses")
+                            self.cfg.background, self.ctx, self.progress, desc="align poses",
+                            colour=sub.colours, colour_cfg=self.cfg.colour)
         self.align_seconds += time.perf_counter() - t0
 
     def _preview(self, step: int) -> None:
@@ -375,18 +391,26 @@ class Trainer:
 
     # -- the loop --------------------------------------------------------------------------------------
     def _attach_poses(self) -> None:
-        """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``), and ``self.net``,
-        what the checkpoint holds: the avatar(s), plus the corrections when there are any."""
+        """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``) and colour
+        transforms for those whose frames get them (``cfg.colour``), and ``self.net``, what the checkpoint
+        holds: the avatar(s), plus the corrections and transforms when there are any."""
         from torch import nn
 
         bones = BONE_SETS[self.cfg.pose.bones]
         for sub in self.subjects:
             sub.poses = (PoseCorrections(self.body, sub.frames.poses, sub.frames.indices, bones)
                          if refine_wanted(self.cfg.pose, sub.seq) else None)
+            sub.colours = FrameColour(len(sub.frames)) if colour_wanted(self.cfg.colour, sub.seq) else None
         self.pose_sets = [s.poses for s in self.subjects if s.poses is not None]
+        self.colour_sets = [s.colours for s in self.subjects if s.colours is not None]
         self.net = self.avatar_net
-        if self.pose_sets:  # checkpoint keys change only for fits that refine poses
-            self.net = nn.ModuleDict({"avatar": self.avatar_net, "poses": nn.ModuleList(self.pose_sets)})
+        if self.pose_sets or self.colour_sets:  # checkpoint keys change only for fits that learn these
+            parts = {"avatar": self.avatar_net}
+            if self.pose_sets:
+                parts["poses"] = nn.ModuleList(self.pose_sets)
+            if self.colour_sets:
+                parts["colours"] = nn.ModuleList(self.colour_sets)
+            self.net = nn.ModuleDict(parts)
 
     def run(self, resume: bool = False) -> Avatar:
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -521,6 +545,8 @@ class Trainer:
                 sub.avatar.info["decoders_shared_with"] = shared
             if sub.poses is not None:
                 sub.avatar.info["pose_refinement"] = sub.poses.summary()
+            if sub.colours is not None:
+                sub.avatar.info["frame_colour"] = sub.colours.summary()
             if self.symmetry[i] is not None:
                 sub.avatar.info["symmetry_prior"] = self.symmetry[i].summary()
             self._finish(i)
@@ -544,6 +570,8 @@ class Trainer:
             metrics["subjects"] = shared
         if self._aligns_poses():
             metrics["pose_alignment"] = {"steps_per_frame": self.cfg.pose.align, "seconds": self.align_seconds}
+        if self.colour_sets:
+            metrics["frame_colour"] = {s.name: s.colours.summary() for s in self.subjects if s.colours is not None}
         if self.pose_sets:
             metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
                                           for s in self.subjects if s.poses is not None}
