@@ -25,11 +25,9 @@ from torch import nn
 
 from gma.train.config import FrameColourConfig
 from gma.train.metrics import ssim, ssim_map
+from gma.train.pose_refine import VIDEO_MARKER
 
 __all__ = ["FrameColour", "colour_wanted", "colour_weights", "weighted_picture_loss"]
-
-# What ``gma import video`` writes into every sequence it makes (gma.video.pipeline.REPORT_NAME).
-VIDEO_MARKER = "video_report.json"
 
 
 def colour_wanted(cfg: FrameColourConfig, seq) -> bool:

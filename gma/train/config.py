@@ -101,12 +101,17 @@ def _stage2_weights() -> LossWeights:
 class FitConfig:
     """Everything ``gma fit`` does; saved (resolved) as ``config.json`` in the fit's work folder."""
 
-    preset: str = doc("quick", "quick (a CPU, minutes) or full (GPU); other options override it")
+    preset: str = doc("quick", "quick (a CPU, minutes: demos and tests), standard (a CPU, half an hour: real "
+                               "video; gma fit's choice for sequences from gma import video) or full (a GPU); "
+                               "other options override it")
     seed: int = doc(0, "seeds the avatar init and the frame order: same seed, same result")
     training: str = doc("two_stage", "two_stage (paper) or one_stage (ablation: all at once)")
     stage1_steps: int = doc(80, "steps of stage 1 (geometry: coarse surfels, mesh layer)")
     stage2_steps: int = doc(160, "steps of stage 2 (texture: fine surfels; F_coarse, f_geo frozen)")
     resolution: int = doc(128, "longest image side the fit renders at (images are area-downsampled)")
+    stage1_resolution: int = doc(0, "longest image side of stage 1 and the pose alignment pass, when smaller than "
+                                    "--resolution: geometry and poses at a low resolution, texture at the full one "
+                                    "(0: --resolution)")
     max_frames: int = doc(0, "use at most this many training frames, evenly spaced (0: all)")
     lr_features: float = doc(0.05, "Adam learning rate of f_geo, f_tex (and free params of 'direct')")
     lr_decoders: float = doc(0.005, "Adam learning rate of the decoder MLPs")
@@ -153,6 +158,9 @@ class FitConfig:
             raise ValueError(f"symmetry must be >= 0, got {self.symmetry}")
         if self.stage1_steps < 0 or self.stage2_steps < 0 or self.resolution < 8:
             raise ValueError("steps must be >= 0 and resolution >= 8")
+        if self.stage1_resolution != 0 and not 8 <= self.stage1_resolution <= self.resolution:
+            raise ValueError(f"--stage1-resolution: expected 0 or 8 to --resolution ({self.resolution}), got "
+                             f"{self.stage1_resolution}")
         for option, value in _float_options(self):
             # Rates, weights, sizes and fractions, all >= 0: a NaN would only show as a diverged fit.
             if not (math.isfinite(value) and value >= 0):
@@ -179,10 +187,15 @@ class FitConfig:
 
 
 # Preset = overrides of the defaults. quick: fits within minutes on a small CPU through lavapipe
-# (few, small renders; 2 fine surfels per face); full: the paper-like setting for a real GPU.
+# (few, small renders; 2 fine surfels per face); standard: an avatar from a phone video on a CPU, shown
+# at 384 px and more: geometry and poses at 192 px, the texture at 384 px, with the colour loss kept off
+# the mask's edge; full: the paper-like setting for a real GPU.
 PRESETS: dict[str, dict] = {
     "quick": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 192, "preview_every": 200,
               "avatar": {"fine_per_face": 2, "feature_dim": 16}},
+    "standard": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 384, "stage1_resolution": 192,
+                 "colour_edge": 2.0, "preview_every": 200, "pose": {"align": 15},
+                 "avatar": {"fine_per_face": 2, "feature_dim": 16}},
     "full": {"stage1_steps": 3000, "stage2_steps": 5000, "resolution": 512, "checkpoint_every": 500,
              "log_every": 50, "preview_every": 1000, "lr_decay": 0.05,
              "avatar": {"fine_per_face": 4, "feature_dim": 32}},

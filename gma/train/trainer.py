@@ -14,6 +14,7 @@ Sequences with estimated poses (from ``gma import video``) also learn per-frame 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -64,6 +65,7 @@ class Stage:
     steps: int
     weights: LossWeights
     groups: tuple[str, ...]  # AvatarModel.param_groups names that learn
+    resolution: int  # longest image side the stage renders at
 
 
 def plan_stages(cfg: FitConfig) -> list[Stage]:
@@ -73,9 +75,10 @@ def plan_stages(cfg: FitConfig) -> list[Stage]:
     fine = "coarse" if rep == "mesh_only" else "fine"
     if cfg.training == "one_stage" or rep == "direct":
         w = LossWeights(**{**cfg.weights1.__dict__, "lpips": cfg.weights2.lpips})
-        return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"))]
-    return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex")),
-            Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"))]
+        return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"), cfg.resolution)]
+    return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex"),
+                  cfg.stage1_resolution or cfg.resolution),
+            Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"), cfg.resolution)]
 
 
 @dataclass
@@ -89,7 +92,11 @@ class Subject:
     out: Path
     poses: PoseCorrections | None = None  # learnt pose corrections (sequences with estimated poses)
     colours: FrameColour | None = None  # learnt per-frame colour transforms (sequences from a video)
-    weights: torch.Tensor | None = None  # [T, H, W, 1] colour-loss weight of each pixel (--colour-edge)
+    # The frames at each stage's resolution, with each pixel's colour-loss weight [T, H, W, 1] (None: 1).
+    views: dict[int, tuple[FrameSet, torch.Tensor | None]] = dataclasses.field(default_factory=dict)
+
+    def view(self, resolution: int) -> tuple[FrameSet, torch.Tensor | None]:
+        return self.views[resolution]
 
 
 def subject_outputs(out: Path, roots: list) -> list[Path]:
@@ -114,7 +121,8 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
 OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False,
-                       "colour_edge": 0.0, "colour.refine": "off", "colour.lr": 0.005, "colour.prior": 0.01}
+                       "colour_edge": 0.0, "colour.refine": "off", "colour.lr": 0.005, "colour.prior": 0.01,
+                       "stage1_resolution": 0}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -185,8 +193,7 @@ class Trainer:
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
                 avatar.model.share_decoders_with(self.subjects[0].avatar.model)
-            weights = colour_weights(frames.masks, cfg.colour_edge) if cfg.colour_edge > 0 else None
-            self.subjects.append(Subject(o.stem, s, frames, avatar, o, weights=weights))
+            self.subjects.append(Subject(o.stem, s, frames, avatar, o))
         first = self.subjects[0]
         self.seq, self.frames, self.avatar, self.model = first.seq, first.frames, first.avatar, first.avatar.model
         self.models = [s.avatar.model for s in self.subjects]
@@ -201,6 +208,11 @@ class Trainer:
                 raise ValueError(f"{cfg.decoders}: unexpected decoder tensors {unexpected}")
             self.frozen_decoders = True
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
+        for sub in self.subjects:
+            for res in {cfg.resolution} | {s.resolution for s in self.stages}:
+                frames = sub.frames.resized(res)
+                weights = colour_weights(frames.masks, cfg.colour_edge) if cfg.colour_edge > 0 else None
+                sub.views[res] = (frames, weights)
         self.pose_start = round(cfg.pose.start * self.stages[0].steps) if self.stages else 0
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
         self.symmetry: list[SymmetryPrior | None] = []  # per subject, built by run() once the config is final
@@ -290,7 +302,8 @@ class Trainer:
               learn_poses: bool = False) -> tuple[torch.Tensor, dict, dict]:
         w, cfg = stage.weights, self.cfg
         subject, t = frame
-        model, frames = self.models[subject], self.subjects[subject].frames
+        model = self.models[subject]
+        frames, weights = self.subjects[subject].view(stage.resolution)
         poses = self.subjects[subject].poses
         t0 = time.perf_counter()
         dec = model.decode(stage.layer)
@@ -304,7 +317,6 @@ class Trainer:
         target = frames.target(t, cfg.background)
         colours = self.subjects[subject].colours
         color = out.color if colours is None else colours.apply(t, out.color, out.alpha, cfg.background)
-        weights = self.subjects[subject].weights
         l1, dssim = weighted_picture_loss(color, target, None if weights is None else weights[t])
         terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - frames.masks[t]).abs().mean()}
         if w.lpips > 0 and self.lpips is not None:
@@ -350,7 +362,8 @@ class Trainer:
                 continue
             with torch.no_grad():
                 decoded = model.decode(stage.layer)
-            fit_corrections(sub.poses, decoded, self.body, sub.frames, self.cfg.pose.align, self.cfg.pose,
+            frames = sub.view(stage.resolution)[0]
+            fit_corrections(sub.poses, decoded, self.body, frames, self.cfg.pose.align, self.cfg.pose,
                             self.cfg.background, self.ctx, self.progress, desc="align poses",
                             colour=sub.colours, colour_cfg=self.cfg.colour)
         self.align_seconds += time.perf_counter() - t0
