@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import pytest
 import torch
 
-from gma.train.appearance import FrameColour, colour_wanted, colour_weights, weighted_picture_loss
+from gma.train.appearance import FrameColour, colour_wanted, colour_weights, unmix_background, weighted_picture_loss
 from gma.train.config import FitConfig, FrameColourConfig, preset
 from gma.train.losses import picture_loss
 
@@ -177,3 +177,21 @@ def test_test_time_colour_fitting_recovers_an_exposure_change(seq, anny_body, gp
     after = float((shown - frames.images[0]).abs().mean())
     assert after < 0.3 * before, (before, after)
     assert float(colour.gain[0].detach().mean()) < -0.05  # darker, through the gain (and the offset)
+
+
+def test_unmix_background_takes_a_green_screen_out_of_soft_edges():
+    person, green = torch.tensor([0.9, 0.1, 0.1]), torch.tensor([0.1, 0.8, 0.2])
+    m = torch.zeros(1, 24, 24, 1)
+    m[0, 6:18, 6:18] = 1.0
+    m[0, 6:18, 5] = 0.5      # a soft left edge
+    m[0, 6:18, 18] = 0.25    # and a softer right edge
+    images = m * person + (1 - m) * green
+    out = unmix_background(images, m)
+    soft = (m[..., 0] > 0) & (m[..., 0] < 1)
+    torch.testing.assert_close(out[soft], person.expand(int(soft.sum()), 3), atol=1e-5, rtol=0)
+    torch.testing.assert_close(out[~soft], images[~soft])                 # the rest as it was
+    target = out * m + 0.5 * (1 - m)                                      # what the fit compares with
+    assert float(target[0, 10, 5, 1]) == pytest.approx(0.5 * 0.1 + 0.5 * 0.5)   # no green left in it
+    # a frame the person fills has no background to estimate: left alone
+    x = torch.rand(1, 8, 8, 3)
+    torch.testing.assert_close(unmix_background(x, torch.full((1, 8, 8, 1), 0.7)), x)

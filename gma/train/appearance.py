@@ -12,6 +12,10 @@
   the real background (a green screen's green, a white wall). The colour loss therefore weighs a pixel 0
   outside the mask, rising to 1 over the ``edge`` pixels inside its boundary; the mask loss alone keeps
   the outline.
+- **Unmixing the background** (:func:`unmix_background`). Where the mask is soft, a pixel is
+  ``m F + (1 - m) B``: the person ``F`` over the real background ``B``. Composited over the fit's grey as
+  it is, the target keeps ``m (1 - m) B`` of the real background (green at a green screen's edges). The
+  background colour around each pixel is estimated from the frame's own background pixels and taken out.
 """
 
 from __future__ import annotations
@@ -27,7 +31,14 @@ from gma.train.config import FrameColourConfig
 from gma.train.metrics import ssim, ssim_map
 from gma.train.pose_refine import VIDEO_MARKER
 
-__all__ = ["FrameColour", "colour_wanted", "colour_weights", "weighted_picture_loss"]
+__all__ = ["FrameColour", "colour_wanted", "colour_weights", "unmix_background", "weighted_picture_loss"]
+
+# The local background colour is a mean over background pixels within a Gaussian of this size (times
+# the image's longer side): wide enough to reach past a limb into the background beside it, narrow
+# enough to follow a wall's shading or a green screen's uneven lighting.
+BACKGROUND_SIGMA = 0.03
+# Pixels whose mask is below this are background (a soft mask's faint halo is not).
+BACKGROUND_BELOW = 0.02
 
 
 def colour_wanted(cfg: FrameColourConfig, seq) -> bool:
@@ -48,6 +59,35 @@ def colour_weights(masks: torch.Tensor, edge: float) -> torch.Tensor:
     # Distance of each person pixel to the nearest background pixel: 1 on the boundary's inner row.
     dist = np.stack([ndimage.distance_transform_edt(m) for m in inside]).astype(np.float32)
     return torch.from_numpy(np.clip(dist / edge, 0.0, 1.0))[..., None]
+
+
+def unmix_background(images: torch.Tensor, masks: torch.Tensor) -> torch.Tensor:
+    """``images`` [T, H, W, 3] with the real background taken out of the person's soft edges: each pixel
+    ``I = m F + (1 - m) B`` becomes ``F = (I - (1 - m) B) / m`` (clamped to [0, 1]), with ``B`` the mean
+    colour of the frame's background pixels (mask < ``BACKGROUND_BELOW``) around it, and ``masks``
+    [T, H, W, 1] the ``m``. Pixels with ``m`` = 1 are unchanged; pixels with ``m`` = 0 are left as they are
+    (the target shows the fit's own background there)."""
+    from gma.train.metrics import separable_blur
+
+    t, h, w, _ = images.shape
+    sigma = max(1.0, BACKGROUND_SIGMA * max(h, w))
+    radius = int(3 * sigma)
+    x = torch.arange(-radius, radius + 1, dtype=torch.float32)
+    kernel = torch.exp(-0.5 * (x / sigma) ** 2)
+    out = images.clone()
+    for i in range(t):
+        m = masks[i]                                                         # [H, W, 1]
+        bg = (m < BACKGROUND_BELOW).float()
+        if not bool(bg.any()):
+            continue  # the person fills the frame: no background to estimate
+        stack = torch.cat([images[i] * bg, bg], -1).permute(2, 0, 1)[None]  # [1, 4, H, W]
+        sums = separable_blur(stack, kernel)[0].permute(1, 2, 0)
+        fallback = (images[i] * bg).sum((0, 1)) / bg.sum()                   # far from any background
+        local = torch.where(sums[..., 3:] > 1e-3, sums[..., :3] / sums[..., 3:].clamp_min(1e-3), fallback)
+        soft = (m > 0) & (m < 1)
+        person = ((images[i] - (1 - m) * local) / m.clamp_min(1e-3)).clamp(0, 1)
+        out[i] = torch.where(soft, person, images[i])
+    return out
 
 
 def weighted_picture_loss(render: torch.Tensor, target: torch.Tensor, weight: torch.Tensor | None

@@ -127,6 +127,10 @@ class FitConfig:
                                   "(gma fit, gma demo)")
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
+    unmix_background: bool = doc(False, "take the real background's colour out of the person mask's soft edge "
+                                         "pixels before compositing the targets over --background: a green screen's "
+                                         "green, a wall's white (estimated per frame from the pixels around; "
+                                         "gma.train.appearance.unmix_background)")
     colour_edge: float = doc(0.0, "pixels over which the colour loss's weight rises from 0 at the person mask's "
                                   "boundary to 1 inside; outside the mask it is 0, so a surfel straying there "
                                   "learns no background colour and the mask loss alone keeps the outline "

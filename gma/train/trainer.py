@@ -30,7 +30,7 @@ from gma.body import load_body
 from gma.core.atomic import atomic_write_json
 from gma.core.errors import NonFiniteError
 from gma.render.image_io import save_png
-from gma.train.appearance import FrameColour, colour_wanted, colour_weights, weighted_picture_loss
+from gma.train.appearance import FrameColour, colour_wanted, colour_weights, unmix_background, weighted_picture_loss
 from gma.train.checkpoint import load_checkpoint, save_checkpoint
 from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
@@ -122,7 +122,7 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
 OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False,
                        "colour_edge": 0.0, "colour.refine": "off", "colour.lr": 0.005, "colour.prior": 0.01,
-                       "stage1_resolution": 0}
+                       "stage1_resolution": 0, "unmix_background": False}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -189,6 +189,8 @@ class Trainer:
         self.subjects: list[Subject] = []
         for i, (s, o) in enumerate(zip(seqs, subject_outputs(self.out, [s.root for s in seqs]), strict=True)):
             frames = load_frames(s, self.body, "train", cfg.resolution, cfg.max_frames)
+            if cfg.unmix_background:
+                frames.images = unmix_background(frames.images, frames.masks)
             torch.manual_seed(cfg.seed + i)
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
