@@ -17,9 +17,12 @@ def test_standard_preset_trains_the_texture_at_384_and_the_geometry_lower():
     assert cfg.colour_edge > 0 and cfg.preset == "standard"
     assert preset("standard", resolution=256).resolution == 256     # options still override it
     with pytest.raises(ValueError, match="--stage1-resolution"):
-        FitConfig(resolution=128, stage1_resolution=256)
-    with pytest.raises(ValueError, match="--stage1-resolution"):
         FitConfig(stage1_resolution=4)
+    # a fit asked for a lower --resolution than the preset's stage 1 runs both stages at it
+    from gma.train.trainer import plan_stages
+
+    assert [s.resolution for s in plan_stages(preset("standard", resolution=128))] == [128, 128]
+    assert [s.resolution for s in plan_stages(preset("standard"))] == [192, 384]
 
 
 def test_gma_fit_picks_standard_for_imported_videos(tmp_path):

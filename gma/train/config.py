@@ -109,9 +109,9 @@ class FitConfig:
     stage1_steps: int = doc(80, "steps of stage 1 (geometry: coarse surfels, mesh layer)")
     stage2_steps: int = doc(160, "steps of stage 2 (texture: fine surfels; F_coarse, f_geo frozen)")
     resolution: int = doc(128, "longest image side the fit renders at (images are area-downsampled)")
-    stage1_resolution: int = doc(0, "longest image side of stage 1 and the pose alignment pass, when smaller than "
-                                    "--resolution: geometry and poses at a low resolution, texture at the full one "
-                                    "(0: --resolution)")
+    stage1_resolution: int = doc(0, "longest image side of stage 1 and the pose alignment pass: geometry and poses "
+                                    "at a low resolution, texture at --resolution (0, or above --resolution: "
+                                    "--resolution)")
     max_frames: int = doc(0, "use at most this many training frames, evenly spaced (0: all)")
     lr_features: float = doc(0.05, "Adam learning rate of f_geo, f_tex (and free params of 'direct')")
     lr_decoders: float = doc(0.005, "Adam learning rate of the decoder MLPs")
@@ -162,9 +162,8 @@ class FitConfig:
             raise ValueError(f"symmetry must be >= 0, got {self.symmetry}")
         if self.stage1_steps < 0 or self.stage2_steps < 0 or self.resolution < 8:
             raise ValueError("steps must be >= 0 and resolution >= 8")
-        if self.stage1_resolution != 0 and not 8 <= self.stage1_resolution <= self.resolution:
-            raise ValueError(f"--stage1-resolution: expected 0 or 8 to --resolution ({self.resolution}), got "
-                             f"{self.stage1_resolution}")
+        if self.stage1_resolution != 0 and self.stage1_resolution < 8:
+            raise ValueError(f"--stage1-resolution: expected 0 (as --resolution) or >= 8, got {self.stage1_resolution}")
         for option, value in _float_options(self):
             # Rates, weights, sizes and fractions, all >= 0: a NaN would only show as a diverged fit.
             if not (math.isfinite(value) and value >= 0):

@@ -77,7 +77,7 @@ def plan_stages(cfg: FitConfig) -> list[Stage]:
         w = LossWeights(**{**cfg.weights1.__dict__, "lpips": cfg.weights2.lpips})
         return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"), cfg.resolution)]
     return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex"),
-                  cfg.stage1_resolution or cfg.resolution),
+                  min(cfg.stage1_resolution or cfg.resolution, cfg.resolution)),
             Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"), cfg.resolution)]
 
 
