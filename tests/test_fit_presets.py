@@ -14,7 +14,7 @@ from gma.train.config import FitConfig, preset
 def test_standard_preset_trains_the_texture_at_384_and_the_geometry_lower():
     cfg = preset("standard")
     assert cfg.resolution >= 384 and 0 < cfg.stage1_resolution < cfg.resolution
-    assert cfg.colour_edge > 0 and cfg.preset == "standard"
+    assert cfg.unmix_background and cfg.preset == "standard"
     assert preset("standard", resolution=256).resolution == 256     # options still override it
     with pytest.raises(ValueError, match="--stage1-resolution"):
         FitConfig(stage1_resolution=4)

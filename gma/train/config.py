@@ -191,13 +191,13 @@ class FitConfig:
 
 # Preset = overrides of the defaults. quick: fits within minutes on a small CPU through lavapipe
 # (few, small renders; 2 fine surfels per face); standard: an avatar from a phone video on a CPU, shown
-# at 384 px and more: geometry and poses at 192 px, the texture at 384 px, the colour loss inside the
-# person's mask only and the real background unmixed from its soft edge; full: the paper-like setting for a real GPU.
+# at 384 px and more: geometry and poses at 192 px, the texture at 384 px, the real background unmixed
+# from the mask's soft edge (docs/fitting.md#the-standard-preset); full: the paper-like setting for a real GPU.
 PRESETS: dict[str, dict] = {
     "quick": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 192, "preview_every": 200,
               "avatar": {"fine_per_face": 2, "feature_dim": 16}},
     "standard": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 384, "stage1_resolution": 192,
-                 "colour_edge": 1.0, "unmix_background": True, "preview_every": 200, "pose": {"align": 15},
+                 "unmix_background": True, "preview_every": 200, "pose": {"align": 15},
                  "avatar": {"fine_per_face": 2, "feature_dim": 16}},
     "full": {"stage1_steps": 3000, "stage2_steps": 5000, "resolution": 512, "checkpoint_every": 500,
              "log_every": 50, "preview_every": 1000, "lr_decay": 0.05,
