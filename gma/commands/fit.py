@@ -39,16 +39,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def default_preset(sequences: list[str]) -> str:
-    """The preset of a fit that names none: ``standard`` for sequences made by ``gma import video`` (a
-    real person to show at full size), ``quick`` otherwise (synthetic and dataset sequences, demos)."""
-    from pathlib import Path
-
-    from gma.train.pose_refine import VIDEO_MARKER
-
-    return "standard" if all((Path(s) / VIDEO_MARKER).is_file() for s in sequences) else "quick"
-
-
 def run(args: argparse.Namespace) -> int:
     from gma.commands._openmp_workers import openmp_workers_asleep
     from gma.commands._options import collect_overrides
@@ -84,3 +74,13 @@ def run(args: argparse.Namespace) -> int:
                   f"{r['mean_bone_deg']:.1f} deg per bone, root {r['mean_root_deg']:.1f} deg / "
                   f"{r['mean_root_shift_cm']:.1f} cm)")
     return 0
+
+
+def default_preset(sequences: list[str]) -> str:
+    """The preset of a fit that names none: ``standard`` for sequences made by ``gma import video`` (a
+    real person to show at full size), ``quick`` otherwise (synthetic and dataset sequences, demos)."""
+    from pathlib import Path
+
+    from gma.train.pose_refine import VIDEO_MARKER
+
+    return "standard" if all((Path(s) / VIDEO_MARKER).is_file() for s in sequences) else "quick"
