@@ -520,6 +520,19 @@ CASES = [
     Case("batch one sequence twice", lambda t, s, a: ["batch", str(s), str(s), "-o", str(t / "b")], "given twice"),
     Case("fit --lr-decoders nan", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--lr-decoders", "nan"],
          "--lr-decoders"),
+    Case("fit --preset of no such name", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--preset", "best"],
+         "'best'"),
+    Case("fit --colour.refine maybe",
+         lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--colour.refine", "maybe"], "--colour.refine"),
+    Case("fit --colour-edge -1", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--colour-edge", "-1"],
+         "--colour-edge"),
+    Case("fit --colour.prior nan", lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--colour.prior", "nan"],
+         "--colour.prior"),
+    Case("fit --stage1-resolution 4",
+         lambda t, s, a: ["fit", str(s), "-o", str(t / "o.gma"), "--stage1-resolution", "4"], "--stage1-resolution"),
+    Case("eval --refine-colour maybe",
+         lambda t, s, a: ["eval", str(a), str(s), "--refine-poses", "1", "--refine-colour", "maybe"], "--refine-colour",
+         argparse=True),
 ]
 
 

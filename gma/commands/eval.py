@@ -34,6 +34,10 @@ def register(subparsers) -> None:
     p.add_argument("--refine-bones", choices=BONE_SET_NAMES, default=PoseRefineConfig().bones,
                    help="bones the test-time pose fitting corrects: body (also the limbs' twist bones, shoulders, "
                         "hips) or video (the ones the video fit estimates), as --pose.bones of gma fit")
+    p.add_argument("--refine-colour", choices=("auto", "on", "off"), default="auto",
+                   help="with --refine-poses, also fit each frame's colour transform (a gain and an offset per "
+                        "channel: the camera's exposure and white balance); auto: when the avatar was fitted "
+                        "with them (gma fit --colour.refine)")
     p.add_argument("--threads", type=int, default=1,
                    help="torch CPU threads (0: torch's default). 1 is fastest on a small CPU, where torch and "
                         "the lavapipe rasteriser compete for cores")
@@ -67,7 +71,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--refine-poses: expected a number of steps >= 0, got {args.refine_poses}")
     results = evaluate_splits(avatar, seq, splits, out, args.resolution, args.background, images=args.images,
                               refine_steps=args.refine_poses, refine_resolution=args.refine_resolution,
-                              refine=PoseRefineConfig(bones=args.refine_bones))
+                              refine=PoseRefineConfig(bones=args.refine_bones),
+                              refine_colour={"auto": None, "on": True, "off": False}[args.refine_colour])
     geometry = results["geometry"]
     if geometry is not None:  # synthetic sequences carry the true clothed mesh
         print("mesh layer vs ground-truth clothed mesh: " + ", ".join(f"{k} {v:.2f}" for k, v in geometry.items()))

@@ -4,8 +4,10 @@ the resolved config, checkpoint, metrics and previews go to ``<stem>.fit/`` besi
 for ``-o me.gma``). ``--resume`` continues an interrupted fit from its last checkpoint; an existing avatar
 is replaced only with ``--force``.
 
-Sequences from ``gma import video`` (estimated poses) also get per-frame pose corrections, learnt with
-the avatar (``--pose.refine auto|on|off``); the refined poses go to ``<output stem>.body.npz``.
+Sequences from ``gma import video`` (estimated poses) also get per-frame pose corrections and colour
+transforms, learnt with the avatar (``--pose.refine``, ``--colour.refine``); the refined poses go to
+``<output stem>.body.npz``. Without ``--preset`` they are fitted with the ``standard`` preset, other
+sequences with ``quick``.
 
 With several sequences (``gma fit SEQ1 SEQ2 ... -o DIR``) the decoders are shared, as in the paper: each
 sequence gets its own avatar (``DIR/<sequence>.gma``, its own features and body identity) and the
@@ -59,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     if args.resume and args.force:
         raise InputError("--resume and --force contradict each other: continue the fit, or start it over")
     overrides = collect_overrides(args)
-    cfg = preset(overrides.pop("preset", "quick"), **overrides)
+    cfg = preset(overrides.pop("preset", None) or default_preset(args.sequence), **overrides)
     prepare_fit_outputs(args.output, args.sequence, args.resume, args.force)  # before reading any image
     seqs = [read_sequence(s) for s in args.sequence]
     trainer = Trainer(cfg, seqs, args.output, progress=not args.quiet, finish=AfterFit())
@@ -82,3 +84,13 @@ def run(args: argparse.Namespace) -> int:
                   f"{r['mean_bone_deg']:.1f} deg per bone, root {r['mean_root_deg']:.1f} deg / "
                   f"{r['mean_root_shift_cm']:.1f} cm)")
     return 0
+
+
+def default_preset(sequences: list[str]) -> str:
+    """The preset of a fit that names none: ``standard`` for sequences made by ``gma import video`` (a
+    real person to show at full size), ``quick`` otherwise (synthetic and dataset sequences, demos)."""
+    from pathlib import Path
+
+    from gma.train.pose_refine import VIDEO_MARKER
+
+    return "standard" if all((Path(s) / VIDEO_MARKER).is_file() for s in sequences) else "quick"

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, fields
 
 from gma.avatar.config import AvatarConfig, doc
 
-__all__ = ["PRESETS", "FitConfig", "LossWeights", "PoseRefineConfig", "preset"]
+__all__ = ["PRESETS", "FitConfig", "FrameColourConfig", "LossWeights", "PoseRefineConfig", "preset"]
 
 TRAINING_MODES = ("two_stage", "one_stage")
 REFINE_MODES = ("auto", "on", "off")
@@ -78,6 +78,21 @@ class PoseRefineConfig:
             raise ValueError(f"--pose.bones: expected one of {BONE_SET_NAMES}, got {self.bones!r}")
 
 
+@dataclass
+class FrameColourConfig:
+    """Per-frame colour transforms learnt with the avatar (``--colour.*``, gma.train.appearance)."""
+
+    refine: str = doc("auto", "auto (on for sequences from 'gma import video': a phone changes exposure and white "
+                              "balance while filming), on, or off. A gain and an offset per channel and frame, "
+                              "discarded with the fit; held-out frames get theirs at test-time pose fitting")
+    lr: float = doc(0.005, "Adam learning rate of the gains and offsets")
+    prior: float = doc(0.01, "pull toward identity: weight of the squared gains and offsets")
+
+    def __post_init__(self):
+        if self.refine not in REFINE_MODES:
+            raise ValueError(f"--colour.refine: expected one of {REFINE_MODES}, got {self.refine!r}")
+
+
 def _stage2_weights() -> LossWeights:
     return LossWeights(lap=100.0, edge=10.0, normal=0.0, lpips=0.02)
 
@@ -86,12 +101,17 @@ def _stage2_weights() -> LossWeights:
 class FitConfig:
     """Everything ``gma fit`` does; saved (resolved) as ``config.json`` in the fit's work folder."""
 
-    preset: str = doc("quick", "quick (a CPU, minutes) or full (GPU); other options override it")
+    preset: str = doc("quick", "quick (a CPU, minutes: demos and tests), standard (a CPU, half an hour: real "
+                               "video; gma fit's choice for sequences from gma import video) or full (a GPU); "
+                               "other options override it")
     seed: int = doc(0, "seeds the avatar init and the frame order: same seed, same result")
     training: str = doc("two_stage", "two_stage (paper) or one_stage (ablation: all at once)")
     stage1_steps: int = doc(80, "steps of stage 1 (geometry: coarse surfels, mesh layer)")
     stage2_steps: int = doc(160, "steps of stage 2 (texture: fine surfels; F_coarse, f_geo frozen)")
     resolution: int = doc(128, "longest image side the fit renders at (images are area-downsampled)")
+    stage1_resolution: int = doc(0, "longest image side of stage 1 and the pose alignment pass: geometry and poses "
+                                    "at a low resolution, texture at --resolution (0, or above --resolution: "
+                                    "--resolution)")
     max_frames: int = doc(0, "use at most this many training frames, evenly spaced (0: all)")
     lr_features: float = doc(0.05, "Adam learning rate of f_geo, f_tex (and free params of 'direct')")
     lr_decoders: float = doc(0.005, "Adam learning rate of the decoder MLPs")
@@ -107,6 +127,14 @@ class FitConfig:
                                   "(gma fit, gma demo)")
     lr_decay: float = doc(0.1, "learning rates fall exponentially to this fraction by each stage's end")
     background: float = doc(0.5, "grey level behind the person (targets are composited over it)")
+    unmix_background: bool = doc(False, "take the real background's colour out of the person mask's soft edge "
+                                         "pixels before compositing the targets over --background: a green screen's "
+                                         "green, a wall's white (estimated per frame from the pixels around; "
+                                         "gma.train.appearance.unmix_background)")
+    colour_edge: float = doc(0.0, "pixels over which the colour loss's weight rises from 0 at the person mask's "
+                                  "boundary to 1 inside; outside the mask it is 0, so a surfel straying there "
+                                  "learns no background colour and the mask loss alone keeps the outline "
+                                  "(0: the colour loss over the whole image)")
     cull_backfaces: bool = doc(True, "skip surfels on faces turned away from the camera (about half the surfels)")
     threads: int = doc(1, "torch CPU threads (0: torch's default). 1 is the safe choice on a small or shared CPU: "
                             "more threads are faster on idle cores but slower beside other busy processes, as "
@@ -124,6 +152,8 @@ class FitConfig:
                                              metadata={"doc": "the representation"})
     pose: PoseRefineConfig = dataclasses.field(default_factory=PoseRefineConfig,
                                                metadata={"doc": "per-frame pose corrections"})
+    colour: FrameColourConfig = dataclasses.field(default_factory=FrameColourConfig,
+                                                  metadata={"doc": "per-frame colour transforms"})
 
     def __post_init__(self):
         if self.training not in TRAINING_MODES:
@@ -132,6 +162,8 @@ class FitConfig:
             raise ValueError(f"symmetry must be >= 0, got {self.symmetry}")
         if self.stage1_steps < 0 or self.stage2_steps < 0 or self.resolution < 8:
             raise ValueError("steps must be >= 0 and resolution >= 8")
+        if self.stage1_resolution != 0 and self.stage1_resolution < 8:
+            raise ValueError(f"--stage1-resolution: expected 0 (as --resolution) or >= 8, got {self.stage1_resolution}")
         for option, value in _float_options(self):
             # Rates, weights, sizes and fractions, all >= 0: a NaN would only show as a diverged fit.
             if not (math.isfinite(value) and value >= 0):
@@ -148,7 +180,7 @@ class FitConfig:
     def from_dict(d: dict) -> FitConfig:
         d = dict(d)
         for name, cls in (("weights1", LossWeights), ("weights2", LossWeights), ("avatar", AvatarConfig),
-                          ("pose", PoseRefineConfig)):
+                          ("pose", PoseRefineConfig), ("colour", FrameColourConfig)):
             if name in d and isinstance(d[name], dict):
                 d[name] = cls(**d[name])
         known = {f.name for f in fields(FitConfig)}
@@ -158,10 +190,15 @@ class FitConfig:
 
 
 # Preset = overrides of the defaults. quick: fits within minutes on a small CPU through lavapipe
-# (few, small renders; 2 fine surfels per face); full: the paper-like setting for a real GPU.
+# (few, small renders; 2 fine surfels per face); standard: an avatar from a phone video on a CPU, shown
+# at 384 px and more: geometry and poses at 192 px, the texture at 384 px, the real background unmixed
+# from the mask's soft edge (docs/fitting.md#the-standard-preset); full: the paper-like setting for a real GPU.
 PRESETS: dict[str, dict] = {
     "quick": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 192, "preview_every": 200,
               "avatar": {"fine_per_face": 2, "feature_dim": 16}},
+    "standard": {"stage1_steps": 200, "stage2_steps": 400, "resolution": 384, "stage1_resolution": 192,
+                 "unmix_background": True, "preview_every": 200, "pose": {"align": 15},
+                 "avatar": {"fine_per_face": 2, "feature_dim": 16}},
     "full": {"stage1_steps": 3000, "stage2_steps": 5000, "resolution": 512, "checkpoint_every": 500,
              "log_every": 50, "preview_every": 1000, "lr_decay": 0.05,
              "avatar": {"fine_per_face": 4, "feature_dim": 32}},

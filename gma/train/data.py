@@ -40,6 +40,21 @@ class FrameSet:
         m = self.masks[t]
         return self.images[t] * m + background * (1 - m)
 
+    def resized(self, resolution: int) -> FrameSet:
+        """The same frames with the longest side at most ``resolution`` (area-downsampled, intrinsics
+        scaled; never upscaled): a fit's stages may render at different sizes."""
+        h, w = self.images.shape[1:3]
+        s = min(1.0, resolution / max(h, w))
+        size = (max(8, round(h * s)), max(8, round(w * s)))
+        if size == (h, w):
+            return self
+        images = F.interpolate(self.images.permute(0, 3, 1, 2), size=size, mode="area").permute(0, 2, 3, 1)
+        masks = F.interpolate(self.masks.permute(0, 3, 1, 2), size=size, mode="area").permute(0, 2, 3, 1)
+        K = self.K.clone()
+        K[:, 0] *= size[1] / w
+        K[:, 1] *= size[0] / h
+        return FrameSet(images, masks, K, self.w2c, self.rest, self.bones, self.indices, self.shape, self.poses)
+
 
 def _resize(x: np.ndarray, size: tuple[int, int]) -> torch.Tensor:
     t = torch.from_numpy(np.ascontiguousarray(x)).float().permute(2, 0, 1)[None]

@@ -19,6 +19,8 @@ from gma.core.atomic import atomic_write_json
 from gma.gpu import get_context
 from gma.render.image_io import save_png
 from gma.synth.generate import gt_mesh
+from gma.train.appearance import FrameColour
+from gma.train.config import FrameColourConfig
 from gma.train.data import load_frames
 from gma.train.losses import GeometryTerms, load_lpips
 from gma.train.metrics import box_metrics, mask_iou, psnr, ssim
@@ -36,14 +38,16 @@ WORST = 5  # frames in the "worst" mean
 def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None, resolution: int = 512,
              background: float = 0.5, body=None, ctx=None, images: int = 4, use_lpips: bool = True,
              refine_steps: int = 0, refine_resolution: int = 192, refine: PoseRefineConfig | None = None,
-             progress: bool = False) -> dict:
+             refine_colour: bool | None = None, progress: bool = False) -> dict:
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
     ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim, psnr_bbox, ssim_bbox,
     mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "resolution", "coarse_to_fine", "mse", "bones",
     "frames", "mean", "poses"} when ``refine_steps`` > 0: each frame's pose first optimised for that many steps at
     ``refine_resolution`` against its image with the avatar frozen (``refine``: learning rates and prior;
-    coarse to fine, see :func:`gma.train.pose_refine.refine_frozen`), then scored again.
+    coarse to fine, see :func:`gma.train.pose_refine.refine_frozen`), then scored again. With
+    ``refine_colour`` (None: when the avatar was fitted with per-frame colour transforms) each frame's colour
+    transform (``gma.train.appearance.FrameColour``) is fitted with its pose, and "refined" has "colour".
 
     The frames' poses are applied to the avatar's own body identity (``avatar.shape``), not the sequence's:
     the avatar's surfels sit on the body it was fitted on. The two are the same for the sequence an avatar
@@ -62,14 +66,21 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     if refine_steps > 0:
         small = load_frames(seq, body, split, min(refine_resolution, resolution), identity=avatar.shape)
         refine = refine or PoseRefineConfig()
-        corr = refine_frozen(decoded, body, small, refine_steps, refine, background, ctx, progress=progress)
+        if refine_colour is None:
+            refine_colour = "frame_colour" in avatar.info
+        colour = FrameColour(len(small)) if refine_colour else None
+        corr = refine_frozen(decoded, body, small, refine_steps, refine, background, ctx, progress=progress,
+                             colour=colour, colour_cfg=FrameColourConfig())
         poses = corr.all_poses()
         with torch.no_grad():
             bones = body.bone_transforms({"pose": poses, "shape": frames.shape})
-        rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images)
+        rows_r = _score(decoded, body, frames, bones, background, ctx, lp, out_dir, split + "_refined", images,
+                        colour)
         result["refined"] = {"steps": refine_steps, "resolution": list(small.images.shape[1:3]), "coarse_to_fine": True,
                              "mse": TEST_TIME_MSE, "bones": refine.bones, "frames": rows_r, **_summaries(rows_r),
                              "poses": corr.summary()}
+        if colour is not None:
+            result["refined"]["colour"] = colour.summary()
     if out_dir is not None:
         out_dir = Path(out_dir)
         atomic_write_json(out_dir / f"metrics_{split}.json", result)
@@ -95,9 +106,11 @@ def _summaries(rows: list[dict]) -> dict:
             "regions": mean_by_region([r["regions"] for r in rows])}
 
 
-def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str, images: int) -> list[dict]:
-    """Per-frame metrics of ``decoded`` posed with ``bones`` [T, J, 4, 4] (None: the frames' own); writes
-    up to ``images`` side-by-side PNGs named ``<name>_<frame>.png`` into ``out_dir`` when given."""
+def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str, images: int,
+           colour: FrameColour | None = None) -> list[dict]:
+    """Per-frame metrics of ``decoded`` posed with ``bones`` [T, J, 4, 4] (None: the frames' own) and, when
+    given, each frame's ``colour`` transform applied; writes up to ``images`` side-by-side PNGs named
+    ``<name>_<frame>.png`` into ``out_dir`` when given."""
     rows = []
     keep = set(np.linspace(0, len(frames) - 1, min(images, len(frames))).round().astype(int).tolist())
     mapper = RegionMapper(ctx or get_context(), body)
@@ -106,7 +119,8 @@ def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str
             frame_bones = frames.bones[t] if bones is None else bones[t]
             out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=False, bones=frame_bones)
             target = frames.target(t, background)
-            render = out.color.clamp(0, 1)
+            color = out.color if colour is None else colour.apply(t, out.color, out.alpha, background)
+            render = color.clamp(0, 1)
             row = {"frame": frames.indices[t], "psnr": psnr(render, target), "ssim": float(ssim(render, target)),
                    **box_metrics(render, target, frames.masks[t]), "mask_iou": mask_iou(out.alpha, frames.masks[t])}
             posed = linear_blend_skinning(frames.rest[t], body.skin_indices, body.skin_weights, frame_bones)
@@ -125,7 +139,7 @@ def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str
 def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path | None = None,
                     resolution: int = 512, background: float = 0.5, body=None, ctx=None, images: int = 4,
                     report=print, refine_steps: int = 0, refine_resolution: int = 192,
-                    refine: PoseRefineConfig | None = None) -> dict:
+                    refine: PoseRefineConfig | None = None, refine_colour: bool | None = None) -> dict:
     """The one evaluation loop of ``gma eval``, ``gma demo`` and the benchmarks: :func:`evaluate` on each
     of ``splits`` that ``seq`` has (``report`` gets each table; ``refine_*``: test-time pose fitting, see
     :func:`evaluate`), then the mesh layer's geometry scores
@@ -138,7 +152,7 @@ def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path
             continue
         results[split] = evaluate(avatar, seq, split, out_dir, resolution, background, body=body, ctx=ctx,
                                   images=images, refine_steps=refine_steps, refine_resolution=refine_resolution,
-                                  refine=refine, progress=report is not None)
+                                  refine=refine, refine_colour=refine_colour, progress=report is not None)
         if report is not None:
             report(format_table(results[split]))
     geometry = geometry_metrics(avatar, seq)

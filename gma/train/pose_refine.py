@@ -198,29 +198,35 @@ def coarse_sigma(step: int, steps: int, size: int) -> float:
 
 
 def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, background: float = 0.5,
-                  ctx=None, progress: bool = False) -> PoseCorrections:
+                  ctx=None, progress: bool = False, colour=None, colour_cfg=None) -> PoseCorrections:
     """Test-time pose fitting (the PeopleSnapshot protocol of Anim-NeRF / InstantAvatar): each frame's
     corrections optimised for ``steps`` Adam steps against its image and mask, with the avatar frozen
     (``decoded`` is used as it is; decode it under ``torch.no_grad``). Frames are independent (no
     smoothness); the prior still pulls toward the input pose. The first steps compare blurred pictures
-    (see ``COARSE_BLUR``). Returns the corrections of ``frames``."""
+    (see ``COARSE_BLUR``). ``colour`` (optional, a ``gma.train.appearance.FrameColour`` of the frames, with
+    ``colour_cfg`` its learning rate and prior) is fitted with the poses. Returns the corrections of ``frames``."""
     corr = PoseCorrections(body, frames.poses, frames.indices, BONE_SETS[cfg.bones])
-    fit_corrections(corr, decoded, body, frames, steps, cfg, background, ctx, progress, mse=TEST_TIME_MSE)
+    fit_corrections(corr, decoded, body, frames, steps, cfg, background, ctx, progress, mse=TEST_TIME_MSE,
+                    colour=colour, colour_cfg=colour_cfg)
     return corr
 
 
 def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cfg: PoseRefineConfig,
                     background: float = 0.5, ctx=None, progress: bool = False, desc: str = "refine poses",
-                    mse: float = 0.0) -> None:
+                    mse: float = 0.0, colour=None, colour_cfg=None) -> None:
     """Each frame's corrections in ``corr`` (from where they are) fitted to its image for ``steps`` steps
     with the avatar ``decoded`` frozen: what :func:`refine_frozen` does, in place. ``mse``: weight of the
     mean squared colour error beside L1 and SSIM (test-time fitting: ``TEST_TIME_MSE``; the fit's alignment
-    pass leaves it at 0)."""
+    pass leaves it at 0). ``colour`` (optional): the frames' colour transforms
+    (``gma.train.appearance.FrameColour``), fitted beside the poses under ``colour_cfg``'s rate and prior."""
     size = max(frames.images.shape[1:3])
     bar = tqdm(total=len(frames) * steps, desc=desc, unit="step", disable=not progress, leave=False)
     for t in range(len(frames)):
-        opt = torch.optim.Adam([{"params": [corr.rot[t]], "lr": cfg.lr_rotation},
-                                {"params": [corr.transl[t]], "lr": cfg.lr_translation}], eps=1e-15)
+        groups = [{"params": [corr.rot[t]], "lr": cfg.lr_rotation},
+                  {"params": [corr.transl[t]], "lr": cfg.lr_translation}]
+        if colour is not None:
+            groups.append({"params": colour.params(t), "lr": colour_cfg.lr})
+        opt = torch.optim.Adam(groups, eps=1e-15)
         base = [g["lr"] for g in opt.param_groups]
         target = frames.target(t, background)
         for i in range(steps):
@@ -228,7 +234,8 @@ def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cf
                 g["lr"] = lr * 0.1 ** (i / max(1, steps))
             bones = body.bone_transforms({"pose": corr.pose(t), "shape": frames.shape})
             out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=True, bones=bones)
-            color, want, alpha, mask = out.color, target, out.alpha, frames.masks[t]
+            color = out.color if colour is None else colour.apply(t, out.color, out.alpha, background)
+            want, alpha, mask = target, out.alpha, frames.masks[t]
             sigma = coarse_sigma(i, steps, size)
             if sigma:  # the four pictures through one blur: one pair of convolutions, not four
                 parts = (color, want, alpha, mask)
@@ -237,6 +244,8 @@ def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cf
             r, d = corr.rot[t], corr.transl[t] / TRANSL_UNIT
             loss = (0.8 * l1 + 0.2 * dssim + mse * (color - want).pow(2).mean() + 0.1 * (alpha - mask).abs().mean()
                     + cfg.prior * (r.pow(2).sum(-1).mean() + d.pow(2).sum()))
+            if colour is not None:
+                loss = loss + colour_cfg.prior * colour.regulariser(t)
             loss.backward()
             opt.step()
             opt.zero_grad(set_to_none=True)

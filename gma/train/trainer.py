@@ -14,6 +14,7 @@ Sequences with estimated poses (from ``gma import video``) also learn per-frame 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -29,10 +30,11 @@ from gma.body import load_body
 from gma.core.atomic import atomic_write_json
 from gma.core.errors import NonFiniteError
 from gma.render.image_io import save_png
+from gma.train.appearance import FrameColour, colour_wanted, colour_weights, unmix_background, weighted_picture_loss
 from gma.train.checkpoint import load_checkpoint, save_checkpoint
 from gma.train.config import FitConfig, LossWeights
 from gma.train.data import FrameSet, load_frames
-from gma.train.losses import GeometryTerms, load_lpips, normal_consistency, picture_loss
+from gma.train.losses import GeometryTerms, load_lpips, normal_consistency
 from gma.train.metrics import psnr
 from gma.train.pose_refine import BONE_SETS, PoseCorrections, fit_corrections, refine_wanted, save_refined_body
 from gma.train.render_step import render_frame
@@ -63,6 +65,7 @@ class Stage:
     steps: int
     weights: LossWeights
     groups: tuple[str, ...]  # AvatarModel.param_groups names that learn
+    resolution: int  # longest image side the stage renders at
 
 
 def plan_stages(cfg: FitConfig) -> list[Stage]:
@@ -72,9 +75,10 @@ def plan_stages(cfg: FitConfig) -> list[Stage]:
     fine = "coarse" if rep == "mesh_only" else "fine"
     if cfg.training == "one_stage" or rep == "direct":
         w = LossWeights(**{**cfg.weights1.__dict__, "lpips": cfg.weights2.lpips})
-        return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"))]
-    return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex")),
-            Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"))]
+        return [Stage("one_stage", fine, cfg.total_steps, w, ("geo_coarse", "geo_fine", "tex"), cfg.resolution)]
+    return [Stage("stage1", "coarse", cfg.stage1_steps, cfg.weights1, ("geo_coarse", "tex"),
+                  min(cfg.stage1_resolution or cfg.resolution, cfg.resolution)),
+            Stage("stage2", fine, cfg.stage2_steps, cfg.weights2, ("geo_fine", "tex"), cfg.resolution)]
 
 
 @dataclass
@@ -87,6 +91,12 @@ class Subject:
     avatar: Avatar
     out: Path
     poses: PoseCorrections | None = None  # learnt pose corrections (sequences with estimated poses)
+    colours: FrameColour | None = None  # learnt per-frame colour transforms (sequences from a video)
+    # The frames at each stage's resolution, with each pixel's colour-loss weight [T, H, W, 1] (None: 1).
+    views: dict[int, tuple[FrameSet, torch.Tensor | None]] = dataclasses.field(default_factory=dict)
+
+    def view(self, resolution: int) -> tuple[FrameSet, torch.Tensor | None]:
+        return self.views[resolution]
 
 
 def subject_outputs(out: Path, roots: list) -> list[Path]:
@@ -110,7 +120,9 @@ def subject_outputs(out: Path, roots: list) -> list[Path]:
 # Fit options added after fits were already being made, with the value that reproduces what a fit did
 # before (a checkpoint from then resumes with it rather than failing the same-config check). A dotted
 # name is a field of a nested section (``pose.align``: ``FitConfig.pose.align``).
-OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False}
+OPTIONS_ADDED_SINCE = {"symmetry": 0.0, "pose.align": 0, "pose.bones": "video", "fill_unseen": False,
+                       "colour_edge": 0.0, "colour.refine": "off", "colour.lr": 0.005, "colour.prior": 0.01,
+                       "stage1_resolution": 0, "unmix_background": False}
 # Fit options that existed for a while and are gone, none of which changed the fit (``pose.mse`` weighed
 # test-time fitting only): a checkpoint whose config.json still has them resumes as if it had not.
 OPTIONS_REMOVED = ("pose.mse",)
@@ -177,6 +189,8 @@ class Trainer:
         self.subjects: list[Subject] = []
         for i, (s, o) in enumerate(zip(seqs, subject_outputs(self.out, [s.root for s in seqs]), strict=True)):
             frames = load_frames(s, self.body, "train", cfg.resolution, cfg.max_frames)
+            if cfg.unmix_background:
+                frames.images = unmix_background(frames.images, frames.masks)
             torch.manual_seed(cfg.seed + i)
             avatar = Avatar.create(cfg.avatar, self.body, frames.shape, seed=cfg.seed + i)
             if i > 0:
@@ -196,6 +210,11 @@ class Trainer:
                 raise ValueError(f"{cfg.decoders}: unexpected decoder tensors {unexpected}")
             self.frozen_decoders = True
         self.stages = [s for s in plan_stages(cfg) if s.steps > 0]
+        for sub in self.subjects:
+            for res in {cfg.resolution} | {s.resolution for s in self.stages}:
+                frames = sub.frames.resized(res)
+                weights = colour_weights(frames.masks, cfg.colour_edge) if cfg.colour_edge > 0 else None
+                sub.views[res] = (frames, weights)
         self.pose_start = round(cfg.pose.start * self.stages[0].steps) if self.stages else 0
         self.geo = GeometryTerms(self.body.faces, self.body.num_vertices)
         self.symmetry: list[SymmetryPrior | None] = []  # per subject, built by run() once the config is final
@@ -229,6 +248,10 @@ class Trainer:
             shift = [p for ps in self.pose_sets for p in ps.translation_params()]
             param_groups += [{"params": rot, "lr": pc.lr_rotation, "base_lr": pc.lr_rotation},
                              {"params": shift, "lr": pc.lr_translation, "base_lr": pc.lr_translation}]
+        if self.colour_sets:  # so do the per-frame colour transforms
+            lr = self.cfg.colour.lr
+            param_groups.append({"params": [p for cs in self.colour_sets for p in cs.parameters()], "lr": lr,
+                                 "base_lr": lr})
         return torch.optim.Adam(param_groups, eps=1e-15)
 
     def _symmetry_prior(self, frames: FrameSet) -> SymmetryPrior | None:
@@ -281,7 +304,8 @@ class Trainer:
               learn_poses: bool = False) -> tuple[torch.Tensor, dict, dict]:
         w, cfg = stage.weights, self.cfg
         subject, t = frame
-        model, frames = self.models[subject], self.subjects[subject].frames
+        model = self.models[subject]
+        frames, weights = self.subjects[subject].view(stage.resolution)
         poses = self.subjects[subject].poses
         t0 = time.perf_counter()
         dec = model.decode(stage.layer)
@@ -293,10 +317,12 @@ class Trainer:
                                   bones=bones)
         t2 = time.perf_counter()
         target = frames.target(t, cfg.background)
-        l1, dssim = picture_loss(out.color, target)
+        colours = self.subjects[subject].colours
+        color = out.color if colours is None else colours.apply(t, out.color, out.alpha, cfg.background)
+        l1, dssim = weighted_picture_loss(color, target, None if weights is None else weights[t])
         terms = {"l1": l1, "ssim": dssim, "mask": (out.alpha - frames.masks[t]).abs().mean()}
         if w.lpips > 0 and self.lpips is not None:
-            terms["lpips"] = self.lpips(out.color, target)
+            terms["lpips"] = self.lpips(color, target)
         offsets = dec.vertex_offsets
         if w.lap > 0:
             terms["lap"] = self.geo.laplacian(offsets)
@@ -313,10 +339,13 @@ class Trainer:
         if poses is not None and learn_poses:  # its weights are in cfg.pose, not the stage's
             terms["pose_reg"] = poses.regulariser(t, cfg.pose)
             loss = loss + terms["pose_reg"]
+        if colours is not None:
+            terms["colour_reg"] = colours.regulariser(t)
+            loss = loss + cfg.colour.prior * terms["colour_reg"]
         timers["decode"] += t1 - t0
         timers["posing_render_fwd"] += t2 - t1
         rec = {k: float(v.detach()) for k, v in terms.items()}
-        rec["psnr"] = psnr(out.color.detach(), target)
+        rec["psnr"] = psnr(color.detach(), target)
         if len(self.subjects) > 1:
             rec["subject"] = subject
         return loss, rec, marks
@@ -335,8 +364,10 @@ class Trainer:
                 continue
             with torch.no_grad():
                 decoded = model.decode(stage.layer)
-            fit_corrections(sub.poses, decoded, self.body, sub.frames, self.cfg.pose.align, self.cfg.pose,
-                            self.cfg.background, self.ctx, self.progress, desc="align poses")
+            frames = sub.view(stage.resolution)[0]
+            fit_corrections(sub.poses, decoded, self.body, frames, self.cfg.pose.align, self.cfg.pose,
+                            self.cfg.background, self.ctx, self.progress, desc="align poses",
+                            colour=sub.colours, colour_cfg=self.cfg.colour)
         self.align_seconds += time.perf_counter() - t0
 
     def _preview(self, step: int) -> None:
@@ -375,18 +406,26 @@ class Trainer:
 
     # -- the loop --------------------------------------------------------------------------------------
     def _attach_poses(self) -> None:
-        """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``), and ``self.net``,
-        what the checkpoint holds: the avatar(s), plus the corrections when there are any."""
+        """Fresh pose corrections for the subjects whose poses are refined (``cfg.pose``) and colour
+        transforms for those whose frames get them (``cfg.colour``), and ``self.net``, what the checkpoint
+        holds: the avatar(s), plus the corrections and transforms when there are any."""
         from torch import nn
 
         bones = BONE_SETS[self.cfg.pose.bones]
         for sub in self.subjects:
             sub.poses = (PoseCorrections(self.body, sub.frames.poses, sub.frames.indices, bones)
                          if refine_wanted(self.cfg.pose, sub.seq) else None)
+            sub.colours = FrameColour(len(sub.frames)) if colour_wanted(self.cfg.colour, sub.seq) else None
         self.pose_sets = [s.poses for s in self.subjects if s.poses is not None]
+        self.colour_sets = [s.colours for s in self.subjects if s.colours is not None]
         self.net = self.avatar_net
-        if self.pose_sets:  # checkpoint keys change only for fits that refine poses
-            self.net = nn.ModuleDict({"avatar": self.avatar_net, "poses": nn.ModuleList(self.pose_sets)})
+        if self.pose_sets or self.colour_sets:  # checkpoint keys change only for fits that learn these
+            parts = {"avatar": self.avatar_net}
+            if self.pose_sets:
+                parts["poses"] = nn.ModuleList(self.pose_sets)
+            if self.colour_sets:
+                parts["colours"] = nn.ModuleList(self.colour_sets)
+            self.net = nn.ModuleDict(parts)
 
     def run(self, resume: bool = False) -> Avatar:
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -521,6 +560,8 @@ class Trainer:
                 sub.avatar.info["decoders_shared_with"] = shared
             if sub.poses is not None:
                 sub.avatar.info["pose_refinement"] = sub.poses.summary()
+            if sub.colours is not None:
+                sub.avatar.info["frame_colour"] = sub.colours.summary()
             if self.symmetry[i] is not None:
                 sub.avatar.info["symmetry_prior"] = self.symmetry[i].summary()
             self._finish(i)
@@ -544,6 +585,8 @@ class Trainer:
             metrics["subjects"] = shared
         if self._aligns_poses():
             metrics["pose_alignment"] = {"steps_per_frame": self.cfg.pose.align, "seconds": self.align_seconds}
+        if self.colour_sets:
+            metrics["frame_colour"] = {s.name: s.colours.summary() for s in self.subjects if s.colours is not None}
         if self.pose_sets:
             metrics["pose_refinement"] = {s.name: {**s.poses.summary(), "body": str(refined_body_path(s.out))}
                                           for s in self.subjects if s.poses is not None}
