@@ -4,7 +4,10 @@
 Why Holistic with ``model_complexity=1``: its models ship inside the ``mediapipe`` wheel, so nothing
 is downloaded at run time (complexities 0 and 2 fetch their model on first use and fail offline), and
 its segmentation comes from the pose network, which is much cleaner on people than the separate
-``selfie_segmentation`` model. The face mesh is used only as a "face visible" cue for the left/right
+``selfie_segmentation`` model. Each frame is detected on its own (``static_image_mode``): in tracking
+mode MediaPipe smooths landmarks with a causal filter that trails a turning person (on a synthetic turn
+the shoulders lagged 10-20° of turn in most frames); the import smooths the tracks afterwards, from
+both sides in time (``gma.video.smooth``). The face mesh is used only as a "face visible" cue for the left/right
 swap logic (``gma.video.swaps``); fitting Anny's facial actions to it is future work.
 
 Results are cached one ``.npz`` per frame (no pickle) under the run's work directory, keyed by the
@@ -28,7 +31,7 @@ __all__ = ["Detections", "MissingExtraError", "detect_frames", "require_mediapip
 
 NUM_POSE = 33
 NUM_HAND = 21
-_CACHE_VERSION = 1
+_CACHE_VERSION = 2  # 2: frames detected independently (static_image_mode)
 
 
 class MissingExtraError(GmaError, ImportError):
@@ -119,7 +122,7 @@ def _frame_key(img: np.ndarray) -> str:
 
 def detect_frames(frames: np.ndarray, cache_dir: str | os.PathLike | None = None,
                   progress: bool = True) -> tuple[Detections, int]:
-    """Run MediaPipe Holistic on frames uint8 [T, H, W, 3] in order (tracking between frames).
+    """Run MediaPipe Holistic on frames uint8 [T, H, W, 3], each frame on its own.
 
     Frames whose cached result (``cache_dir/000123.npz`` with a matching pixel hash) exists are not
     detected again. Returns (detections, number of frames reused from the cache).
@@ -143,8 +146,8 @@ def detect_frames(frames: np.ndarray, cache_dir: str | os.PathLike | None = None
             if holistic is None:
                 mp = mp or require_mediapipe()
                 holistic = mp.solutions.holistic.Holistic(
-                    static_image_mode=False, model_complexity=1, enable_segmentation=True,
-                    smooth_landmarks=True, refine_face_landmarks=False,
+                    static_image_mode=True, model_complexity=1, enable_segmentation=True,
+                    refine_face_landmarks=False,
                 )
             res = _detect_one(holistic, img)
             if path is not None:
