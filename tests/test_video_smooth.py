@@ -72,3 +72,29 @@ def test_short_clips_and_bad_shapes():
         smooth_tracks(np.zeros((5, 2)), np.ones((5, 2)))
     with pytest.raises(ValueError, match="weights"):
         smooth_tracks(np.zeros((5, 2, 3)), np.ones((5, 3)))
+
+
+def test_a_clip_without_hands_or_with_missed_frames_smooths_cleanly():
+    """smooth_landmarks on a clip where no hand is ever seen and one frame has no person: the hands stay
+    absent (zeros, presence 0), the missed frame stays as detected (NaN), visibility is kept, and the
+    found frames' pose comes out finite and on the (straight) track."""
+    from gma.video.smooth import smooth_landmarks
+
+    T = 9
+    t = np.arange(T, dtype=float)
+    pose2d = np.zeros((T, 33, 3))
+    pose2d[..., 0] = 100 + 4 * t[:, None] + np.arange(33)  # every landmark moving right at 4 px a frame
+    pose2d[..., 1] = 200 + np.arange(33)
+    pose2d[..., 2] = 0.9
+    pose3d = pose2d.copy() / 100
+    hands2d = np.zeros((T, 2, 21, 3))
+    found = np.ones(T, bool)
+    found[4] = False
+    pose2d[4], pose3d[4] = np.nan, np.nan
+    p2, p3, h2 = smooth_landmarks(pose2d, pose3d, hands2d, found)
+    assert np.array_equal(h2, hands2d)
+    assert np.isnan(p2[4]).all() and np.isnan(p3[4]).all()
+    assert np.isfinite(p2[found]).all() and np.isfinite(p3[found]).all()
+    assert np.allclose(p2[found], pose2d[found], atol=1e-3) and np.array_equal(p2[..., 2][found], pose2d[..., 2][found])
+    same = smooth_landmarks(pose2d, pose3d, hands2d, found, radius=0)
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(same, (pose2d, pose3d, hands2d), strict=True))
