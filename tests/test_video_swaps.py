@@ -93,3 +93,20 @@ def test_apply_limb_swaps_exchanges_the_limb_and_its_hand_only():
     assert np.array_equal(s2[0], p2[0]) and h2[1, 1, 0, 2] == 1 and h2[0, 0, 0, 2] == 1
     back, _, _ = apply_limb_swaps(s2, s3, h2, {"arms": frames})
     assert np.array_equal(back, p2)
+
+
+def test_detection_modes_find_the_person_and_keep_their_own_caches(tmp_path, synth_clip):
+    """MediaPipe tracking the person and detecting each frame on its own both find the synthetic person;
+    a cache written in one mode is not read back as the other's."""
+    pytest.importorskip("mediapipe", reason="the video extra (pip install 'gma[video]') is not installed")
+    from gma.video.detect import detect_frames
+    from gma.video.frames import read_video
+
+    frames, _ = read_video(synth_clip[1], 0, 3)
+    tracked, reused = detect_frames(frames, tmp_path, progress=False, tracking=True)
+    assert tracked.found.all() and reused == 0
+    single, reused = detect_frames(frames, tmp_path, progress=False, tracking=False)
+    assert single.found.all() and reused == 0  # the tracking cache was not taken for a per-frame one
+    assert np.abs(single.pose2d[:, 11:13, :2] - tracked.pose2d[:, 11:13, :2]).max() < 10  # same shoulders, px
+    _, reused = detect_frames(frames, tmp_path, progress=False, tracking=False)
+    assert reused == 3

@@ -129,7 +129,7 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2],
                     smooth_frames=args.smooth_frames)
     cfg = VideoImportConfig(focal=args.focal, camera=camera, start=args.start, end=args.end, skip=args.skip,
-                            check_masks=not args.no_mask_check, fit=fit)
+                            check_masks=not args.no_mask_check, tracking=not args.per_frame, fit=fit)
     seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body, **kw)
     err = report.get("reprojection_error_px_mean")
     print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
@@ -177,7 +177,7 @@ def _import_motion(args: argparse.Namespace) -> int:
     fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2],
                     smooth_frames=args.smooth_frames)
     cfg = VideoImportConfig(focal=args.focal, camera=_camera_intrinsics(args), start=args.start, end=args.end,
-                            skip=args.skip, fit=fit)
+                            skip=args.skip, tracking=not args.per_frame, fit=fit)
     motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force, feet=args.feet)
     if args.fps is not None and abs(args.fps - motion.fps) > 1e-6:
         motion.pose = resample(motion.pose, motion.fps, args.fps)
@@ -274,6 +274,9 @@ def _smoothing(parser) -> None:
     parser.add_argument("--smooth-frames", type=non_negative_int, default=3, metavar="N",
                         help="video: the landmarks are smoothed over N frames either side before the body fit, "
                              "without lag (a quadratic over the window; 0: not smoothed)")
+    parser.add_argument("--per-frame", action="store_true",
+                        help="video: MediaPipe detects every frame on its own instead of tracking the person "
+                             "(its tracking filter lags a fast turn: for clips sampled sparsely in time)")
 
 
 def _register_motion(fmt) -> None:

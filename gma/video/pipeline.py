@@ -61,6 +61,7 @@ class VideoImportConfig:
     max_decoded_bytes: int | None = field(default_factory=memory_budget)  # of decoded frames (gma.video.frames)
     sheet_frames: int = 12  # overlays on the contact sheet
     check_masks: bool = True  # MediaPipe's masks checked against the background plate (gma.video.matte)
+    tracking: bool = True  # MediaPipe tracks the person from frame to frame (else: each frame on its own)
     fit: FitConfig = field(default_factory=FitConfig)
 
 
@@ -161,11 +162,11 @@ def reusable_work(work: Path) -> Iterator[Path]:
                         "them, delete it to start over)") from None
 
 
-def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, timings: dict):
+def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, timings: dict, tracking: bool = True):
     """MediaPipe detections of ``frames`` [T, H, W, 3] (cached in ``work/detect``): (detections, frames
     reused from the cache). No person in any frame is an :class:`InputError` naming ``src``."""
     t0 = time.perf_counter()
-    det, reused = detect_frames(frames, work / "detect", progress=progress)
+    det, reused = detect_frames(frames, work / "detect", progress=progress, tracking=tracking)
     timings["detect"] = time.perf_counter() - t0
     if not det.found.any():
         raise InputError(f"{src}: no person detected in any of the {len(frames)} frames")
@@ -195,7 +196,7 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
         if undistort is not None:  # the user's masks are of the distorted frames
             masks = np.stack([undistort(m) for m in masks])
         mask_check = {"applied": False, "reason": "the user's masks"}
-    det, reused = detect_person(src, frames, work, progress, timings)
+    det, reused = detect_person(src, frames, work, progress, timings, cfg.tracking)
     if mask_dir is None:
         masks, mask_check = checked_masks(frames, det.masks, cfg, progress, timings)
 
