@@ -271,9 +271,9 @@ def _register_video(fmt) -> None:
 
 
 def _smoothing(parser) -> None:
-    parser.add_argument("--smooth-frames", type=non_negative_int, default=3, metavar="N",
-                        help="video: the landmarks are smoothed over N frames either side before the body fit, "
-                             "without lag (a quadratic over the window; 0: not smoothed)")
+    parser.add_argument("--smooth-frames", type=non_negative_int, default=0, metavar="N",
+                        help="video: smooth the landmarks over N frames either side before the body fit, without "
+                             "lag (a quadratic over the window; default 0: as detected). For --per-frame clips")
     parser.add_argument("--per-frame", action="store_true",
                         help="video: MediaPipe detects every frame on its own instead of tracking the person "
                              "(its tracking filter lags a fast turn: for clips sampled sparsely in time)")

@@ -7,11 +7,11 @@ its segmentation comes from the pose network, which is much cleaner on people th
 ``selfie_segmentation`` model. Two modes: tracking (each frame's search starts from the last one's
 person, landmarks smoothed by MediaPipe's causal filter) and per frame (``static_image_mode``: every
 frame on its own). The causal filter trails a fast-turning person (on a 16-frame synthetic turn the
-shoulders lagged 10-20° of turn in most frames); on real footage turning at a walking pace tracking
-scored better (docs/fitting.md), so it is the default. Either way the import smooths the tracks
-afterwards from both sides in time (``gma.video.smooth``). The face mesh is used only as a "face
-visible" cue for the left/right swap logic (``gma.video.swaps``); fitting Anny's facial actions to it is
-future work.
+shoulders lagged 10-20° of turn in most frames); on real footage turning at a walking pace the two
+score alike (docs/fitting.md), so tracking stays the default. Per-frame detections jitter more; the
+import can smooth them from both sides in time (``gma.video.smooth``, ``--smooth-frames``). The face
+mesh is used only as a "face visible" cue for the left/right swap logic (``gma.video.swaps``); fitting
+Anny's facial actions to it is future work.
 
 Results are cached one ``.npz`` per frame (no pickle) under the run's work directory, keyed by the
 frame's pixels, so a second run (after a crash, or with other fit settings) skips detection.
