@@ -57,13 +57,20 @@ IPER = iper_clip()
 KEYS = ("psnr", "psnr_bbox", "ssim_bbox", "mask_iou")
 
 
+# How the clips are imported (``--per-frame``, ``--smooth-frames``: gma import video's options of the same
+# names); use a separate --work for each, as the imports are reused by folder.
+IMPORT = {"tracking": True, "smooth_frames": 0}
+
+
 def _import(clip: Path, out: Path, focal, anny) -> dict:
-    from gma.video import VideoImportConfig, estimate_sequence
+    from gma.video import FitConfig, VideoImportConfig, estimate_sequence
 
     if (out / "video_report.json").is_file():
         return json.loads((out / "video_report.json").read_text())
     t0 = time.perf_counter()
-    _, report = estimate_sequence(clip, out, config=VideoImportConfig(focal=focal), anny=anny, progress=False)
+    cfg = VideoImportConfig(focal=focal, tracking=IMPORT["tracking"],
+                            fit=FitConfig(smooth_frames=IMPORT["smooth_frames"]))
+    _, report = estimate_sequence(clip, out, config=cfg, anny=anny, progress=False)
     report["wall_s"] = time.perf_counter() - t0
     return report
 
@@ -430,9 +437,12 @@ def main(argv=None) -> int:
                     help="also fit the refined estimated-pose synthetic avatar at these training resolutions")
     ap.add_argument("--steps-factors", type=float, nargs="*", default=[],
                     help="also fit it with the quick preset's steps times these factors")
+    ap.add_argument("--per-frame", action="store_true", help="import with MediaPipe detecting each frame on its own")
+    ap.add_argument("--smooth-frames", type=int, default=0, help="import with the landmarks smoothed over N frames")
     ap.add_argument("--time-only", action="store_true",
                     help="only import and fit the synthetic turn once, timed (no iPER, no other fits)")
     args = ap.parse_args(argv)
+    IMPORT.update(tracking=not args.per_frame, smooth_frames=args.smooth_frames)
     torch.set_num_threads(1)  # torch and lavapipe share the cores (see gma fit --threads)
 
     from gma.body import load_body
