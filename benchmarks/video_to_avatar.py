@@ -17,6 +17,17 @@ frame instead (views between training views) and prints the same rows for that s
                                          [--refine-steps 500] [--skip-synth] [--skip-iper] [--interleaved]
     python benchmarks/video_to_avatar.py --time-only [--frames 16] [--size 128]
 
+Each part ends with one table of where the held-out error goes (``cause_table``; kept in
+``--work``/``synth_causes.md`` and ``iper_causes.md``, and shown in docs/fitting.md): per avatar, the held-out
+bbox PSNR, the mean of its worst 5 frames, and PSNR by body region of ``gma eval`` (face, hands, arms,
+torso, legs, what no body face covers, and the band along the mask's outline), mask IoU and the rendered
+opacity on the outline band. ``--resolutions`` and ``--steps-factors`` add rows of the refined
+estimated-pose synthetic avatar fitted at other training resolutions or with more or fewer steps;
+``--iper-fits on`` makes only the refined iPER fit.
+
+    python benchmarks/video_to_avatar.py --skip-iper --frames 16 --size 128 --refine-steps 50 \
+                                         [--resolutions 96 128] [--steps-factors 0.5 2]
+
 ``--time-only`` is what a user waits for: the synthetic turn's mp4 imported and fitted once (the
 preset's defaults, pose refinement on as for any imported video), the held-out novel poses scored without
 test-time fitting; it prints the import, fit and total seconds (``benchmarks/report.py`` runs it).
@@ -46,13 +57,20 @@ IPER = iper_clip()
 KEYS = ("psnr", "psnr_bbox", "ssim_bbox", "mask_iou")
 
 
+# How the clips are imported (``--per-frame``, ``--smooth-frames``: gma import video's options of the same
+# names); use a separate --work for each, as the imports are reused by folder.
+IMPORT = {"tracking": True, "smooth_frames": 0}
+
+
 def _import(clip: Path, out: Path, focal, anny) -> dict:
-    from gma.video import VideoImportConfig, estimate_sequence
+    from gma.video import FitConfig, VideoImportConfig, estimate_sequence
 
     if (out / "video_report.json").is_file():
         return json.loads((out / "video_report.json").read_text())
     t0 = time.perf_counter()
-    _, report = estimate_sequence(clip, out, config=VideoImportConfig(focal=focal), anny=anny, progress=False)
+    cfg = VideoImportConfig(focal=focal, tracking=IMPORT["tracking"],
+                            fit=FitConfig(smooth_frames=IMPORT["smooth_frames"]))
+    _, report = estimate_sequence(clip, out, config=cfg, anny=anny, progress=False)
     report["wall_s"] = time.perf_counter() - t0
     return report
 
@@ -82,6 +100,7 @@ def _fit(seq, out: Path, refine: str, body, ctx, **overrides) -> tuple[object, f
 def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
     from gma.train.evaluate import evaluate
     from gma.train.pose_refine import TEST_TIME_MSE, PoseRefineConfig
+    from gma.train.regions import REGION_ORDER
 
     cached = out / f"metrics_{split}.json"
     if cached.is_file():
@@ -92,8 +111,10 @@ def _eval(avatar, seq, split: str, out: Path, steps: int, body, ctx) -> dict:
         refined = res.get("refined", {})
         fitted = out.with_suffix(".gma")  # X.eval scores X.gma; an avatar fitted again is scored again
         newer = not fitted.is_file() or cached.stat().st_mtime >= fitted.stat().st_mtime
-        if refined.get("steps", 0) == steps and "identity_delta" in res and refined.get("coarse_to_fine") and newer \
-                and refined.get("mse", 0.0) == TEST_TIME_MSE and refined.get("bones") == PoseRefineConfig().bones:
+        regions = set(res.get("regions", {})) == set(REGION_ORDER)  # (scores from before the torso, legs, edge)
+        if refined.get("steps", 0) == steps and "identity_delta" in res and newer and regions and (steps == 0 or (
+                refined.get("coarse_to_fine") and refined.get("mse", 0.0) == TEST_TIME_MSE
+                and refined.get("bones") == PoseRefineConfig().bones)):
             return res
     return evaluate(avatar, seq, split, out, resolution=192, body=body, ctx=ctx, images=13, use_lpips=False,
                     refine_steps=steps)
@@ -106,6 +127,37 @@ def _row(name: str, res: dict, fit_s: float | None = None) -> str:
         cells += [f"{r[k]:8.2f}" if k.startswith("psnr") else f"{r[k]:8.3f}" for k in KEYS]
     fit = f"{fit_s:7.0f}" if fit_s is not None else "       "
     return f"  {name:<34}{fit} " + " ".join(cells)
+
+
+def _scored(res: dict) -> dict:
+    """The scores a table reads: after test-time pose fitting where it ran, else as evaluated."""
+    return res.get("refined", res)
+
+
+def cause_table(rows: list[tuple[str, dict]]) -> str:
+    """A markdown table, one row per avatar (label, ``gma eval`` result): held-out bbox PSNR, its worst 5
+    frames, and PSNR by region (``gma.train.regions``; "–" where no held-out frame shows the region), after
+    test-time pose fitting where it ran."""
+    from gma.train.regions import REGION_ORDER
+
+    head = ["avatar", "bbox PSNR", "worst 5", *REGION_ORDER, "mask IoU", "edge opacity"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for label, res in rows:
+        r = _scored(res)
+        regions = r["regions"]
+        cells = [label, f"{r['mean']['psnr_bbox']:.2f}", f"{r['worst']['psnr_bbox']:.2f}"]
+        cells += ["–" if regions[n]["psnr"] is None else f"{regions[n]['psnr']:.2f}" for n in REGION_ORDER]
+        edge = regions["edge"]["opacity"]
+        cells += [f"{r['mean']['mask_iou']:.3f}", "–" if edge is None else f"{edge:.3f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _print_table(title: str, rows: list[tuple[str, dict]], work: Path, name: str) -> None:
+    """Print the cause and region table and keep it as ``work/name.md`` (what docs/fitting.md shows)."""
+    table = f"{title}\n\n{cause_table(rows)}\n"
+    (work / f"{name}.md").write_text(table)
+    print(f"\n{table}  (kept in {work / (name + '.md')})")
 
 
 def _header() -> str:
@@ -131,7 +183,7 @@ def _synthetic_clip(work: Path, frames: int, size: int, body, ctx):
     return gt, clip
 
 
-def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx) -> None:
+def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx, resolutions=(), steps_factors=()) -> None:
     from gma.data import read_sequence
 
     gt, clip = _synthetic_clip(work, frames, size, body, ctx)
@@ -140,7 +192,7 @@ def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx) -> None
     print(f"\nsynthetic turn, {frames} frames at {size} px -> mp4 -> gma import video: mask IoU of the fitted "
           f"body {report['mask_iou_mean']:.3f}, reprojection {report.get('reprojection_error_px_mean')} px")
     print(f"  phenotype fitted {report['phenotype']}; true {np.round(gt.body.arrays['phenotype'], 3).tolist()}")
-    rows, scores = [], {}
+    rows, scores, causes = [], {}, []
     on_video = _true_poses_on_video(work / "synth_video_truepose", gt, work / "synth_video")
     for name, seq, refine, tag in (("true poses", gt, "off", "true"),
                                    ("true poses, the video's frames", on_video, "off", "true_on_video"),
@@ -149,7 +201,9 @@ def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx) -> None
         avatar, fit_s = _fit(seq, work / f"synth_{tag}.gma", refine, body, ctx)
         res = _eval(avatar, gt, "test_pose", work / f"synth_{tag}.eval", steps, body, ctx)
         rows.append(_row(name, res, fit_s))
-        scores[tag] = res["refined"]["mean"]["psnr_bbox"]
+        causes.append((name, res))
+        scores[tag] = _scored(res)["mean"]["psnr_bbox"]
+    causes += _variant_rows(est, gt, work, steps, body, ctx, resolutions, steps_factors)
     print(f"  training-frame joints vs truth (13 COCO joints, px at {size} px): estimated {_joint_px(gt, est, None)}, "
           f"refined in the fit {_joint_px(gt, est, work / 'synth_estimated_refined.body.npz')}")
     print(f"held-out novel poses of the ground truth (true poses on each avatar's own body shape, true images, "
@@ -160,6 +214,30 @@ def synthetic(work: Path, frames: int, size: int, steps: int, body, ctx) -> None
           f"{scores['true_on_video'] - scores['estimated_refined']:.2f} dB below true poses on the same video "
           f"frames and masks, {scores['true'] - scores['estimated_refined']:.2f} dB below true poses on the "
           "original frames and masks")
+    _print_table(f"Synthetic turn, {frames} training frames at {size} px, 8 held-out novel poses scored at 192 px "
+                 f"after {steps} test-time pose-fitting steps per frame (quick preset unless the row says)",
+                 causes, work, "synth_causes")
+
+
+def _variant_rows(est, gt, work: Path, steps: int, body, ctx, resolutions, steps_factors) -> list[tuple[str, dict]]:
+    """The refined estimated-pose fit again at other training resolutions and step counts (quick preset
+    otherwise), scored like the others: what resolution and steps are worth."""
+    from gma.train.config import preset
+
+    quick = preset("quick")
+    rows = []
+    for res_px in resolutions:
+        tag = f"estimated_refined_{res_px}px"
+        avatar, _ = _fit(est, work / f"synth_{tag}.gma", "on", body, ctx, resolution=res_px)
+        rows.append((f"estimated, refined, fit at {res_px} px",
+                     _eval(avatar, gt, "test_pose", work / f"synth_{tag}.eval", steps, body, ctx)))
+    for factor in steps_factors:
+        s1, s2 = round(quick.stage1_steps * factor), round(quick.stage2_steps * factor)
+        tag = f"estimated_refined_{s1}_{s2}steps"
+        avatar, _ = _fit(est, work / f"synth_{tag}.gma", "on", body, ctx, stage1_steps=s1, stage2_steps=s2)
+        rows.append((f"estimated, refined, {s1} + {s2} steps",
+                     _eval(avatar, gt, "test_pose", work / f"synth_{tag}.eval", steps, body, ctx)))
+    return rows
 
 
 def time_only(work: Path, frames: int, size: int, body, ctx) -> None:
@@ -223,18 +301,19 @@ def _joint_px(gt, est, refined_body) -> str:
     return f"{err.mean():.2f} ({np.median(err):.2f})"
 
 
-def _refinement_rows(seq, work: Path, prefix: str, steps: int, body, ctx) -> dict:
-    """Fit ``seq`` without and with pose refinement, score its test split, print a row each and the
-    held-out bbox PSNR gain (no refinement -> refined fit + test-time fitting)."""
+def _refinement_rows(seq, work: Path, prefix: str, steps: int, body, ctx, variants=("off", "on")) -> dict:
+    """Fit ``seq`` without and with pose refinement (those of ``variants``), score its test split, print a
+    row each and the held-out bbox PSNR gain (no refinement -> refined fit + test-time fitting)."""
     results = {}
-    for refine in ("off", "on"):
+    for refine in variants:
         avatar, fit_s = _fit(seq, work / f"{prefix}_{refine}.gma", refine, body, ctx)
         results[refine] = _eval(avatar, seq, "test", work / f"{prefix}_{refine}.eval", steps, body, ctx)
         print(_row(f"fit with pose refinement {refine}", results[refine], fit_s))
-    base = results["off"]["mean"]["psnr_bbox"]
-    best = results["on"]["refined"]["mean"]["psnr_bbox"]
-    print(f"  bounding-box PSNR on held-out frames: {base:.2f} dB without refinement -> {best:.2f} dB with "
-          f"refinement in the fit and at test time ({best - base:+.2f} dB)")
+    if "off" in results and "on" in results:
+        base = results["off"]["mean"]["psnr_bbox"]
+        best = _scored(results["on"])["mean"]["psnr_bbox"]
+        print(f"  bounding-box PSNR on held-out frames: {base:.2f} dB without refinement -> {best:.2f} dB with "
+              f"refinement in the fit and at test time ({best - base:+.2f} dB)")
     return results
 
 
@@ -254,7 +333,17 @@ def _interleaved_copy(seq_dir: Path, out: Path, n: int):
     return read_sequence(out)
 
 
-def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = False) -> None:
+def _both_scores(label: str, res: dict) -> list[tuple[str, dict]]:
+    """Table rows of one evaluated avatar: held-out poses as estimated, and after test-time fitting."""
+    plain = {k: v for k, v in res.items() if k != "refined"}
+    rows = [(f"{label}, held-out poses as estimated", plain)]
+    if "refined" in res:
+        rows.append((f"{label}, test-time pose fitting", res["refined"]))
+    return rows
+
+
+def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = False,
+         variants=("off", "on", "nosym")) -> None:
     from gma.data import read_sequence
 
     seq_dir = work / "iper"
@@ -267,14 +356,22 @@ def iper(work: Path, steps: int, body, ctx, figure: Path, interleaved: bool = Fa
           f"{report['mask_iou_mean']:.3f}, reprojection {report.get('reprojection_error_px_mean')} px, "
           f"phenotype {report['phenotype']}")
     print(_header())
-    results = _refinement_rows(seq, work, "iper", steps, body, ctx)
-    _figure(work, results, figure)
-    # The left-right symmetry prior (on by default) fills in the side the turn shows less: the refined fit
-    # without it, and the held-out frames side by side.
-    avatar, fit_s = _fit(seq, work / "iper_on_nosym.gma", "on", body, ctx, symmetry=0.0)
-    nosym = _eval(avatar, seq, "test", work / "iper_on_nosym.eval", steps, body, ctx)
-    print(_row("fit with pose refinement on, --symmetry 0", nosym, fit_s))
-    _symmetry_figure(work, results["on"], figure.with_name("iper_symmetry.png"))
+    results = _refinement_rows(seq, work, "iper", steps, body, ctx, [v for v in ("off", "on") if v in variants])
+    causes = [row for refine, res in results.items()
+              for row in _both_scores(f"pose refinement {refine} in the fit", res)]
+    if "off" in results and "on" in results:
+        _figure(work, results, figure)
+    if "nosym" in variants:
+        # The left-right symmetry prior (on by default) fills in the side the turn shows less: the refined fit
+        # without it, and the held-out frames side by side.
+        avatar, fit_s = _fit(seq, work / "iper_on_nosym.gma", "on", body, ctx, symmetry=0.0)
+        nosym = _eval(avatar, seq, "test", work / "iper_on_nosym.eval", steps, body, ctx)
+        print(_row("fit with pose refinement on, --symmetry 0", nosym, fit_s))
+        causes += _both_scores("refined, --symmetry 0", nosym)
+        if "on" in results:
+            _symmetry_figure(work, results["on"], figure.with_name("iper_symmetry.png"))
+    _print_table(f"iPER turn, {n} frames at 512 px, last {len(split['test'])} held out, quick preset, scored at "
+                 f"192 px; test-time pose fitting {steps} steps per frame", causes, work, "iper_causes")
     if interleaved:
         seq = _interleaved_copy(seq_dir, work / "iper_interleaved", n)
         print(f"\niper_turn_512.gif, every fourth frame held out ({len(seq.split('test'))} frames, views between "
@@ -333,9 +430,19 @@ def main(argv=None) -> int:
     ap.add_argument("--skip-iper", action="store_true")
     ap.add_argument("--interleaved", action="store_true",
                     help="also fit and score the iPER clip with every fourth frame held out")
+    ap.add_argument("--iper-fits", default="off,on,nosym",
+                    help="which iPER fits to make: off (no pose refinement), on (refined), nosym (refined, "
+                         "--symmetry 0); comma-separated")
+    ap.add_argument("--resolutions", type=int, nargs="*", default=[],
+                    help="also fit the refined estimated-pose synthetic avatar at these training resolutions")
+    ap.add_argument("--steps-factors", type=float, nargs="*", default=[],
+                    help="also fit it with the quick preset's steps times these factors")
+    ap.add_argument("--per-frame", action="store_true", help="import with MediaPipe detecting each frame on its own")
+    ap.add_argument("--smooth-frames", type=int, default=0, help="import with the landmarks smoothed over N frames")
     ap.add_argument("--time-only", action="store_true",
                     help="only import and fit the synthetic turn once, timed (no iPER, no other fits)")
     args = ap.parse_args(argv)
+    IMPORT.update(tracking=not args.per_frame, smooth_frames=args.smooth_frames)
     torch.set_num_threads(1)  # torch and lavapipe share the cores (see gma fit --threads)
 
     from gma.body import load_body
@@ -350,11 +457,12 @@ def main(argv=None) -> int:
         return 0
     if not args.skip_iper:
         if IPER.is_file():
-            iper(work, args.refine_steps, body, ctx, Path(args.figure), args.interleaved)
+            iper(work, args.refine_steps, body, ctx, Path(args.figure), args.interleaved,
+                 [v for v in args.iper_fits.split(",") if v])
         else:
             print(f"skipped: {iper_missing(IPER)}")
     if not args.skip_synth:
-        synthetic(work, args.frames, args.size, args.refine_steps, body, ctx)
+        synthetic(work, args.frames, args.size, args.refine_steps, body, ctx, args.resolutions, args.steps_factors)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
     return 0
 

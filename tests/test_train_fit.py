@@ -212,11 +212,11 @@ def test_eval_and_cli(seq, anny_body, gpu, tmp_path, capsys):
     assert len(res["frames"]) == 2 and res["mean"]["psnr"] > 10 and 0 < res["mean"]["ssim"] <= 1
     table = (tmp_path / "ev" / "metrics_test_pose.txt").read_text()
     assert "mean" in table and "region" in table
-    # per region: the front-facing held-out frames show the face, the arms and the rest of the person
-    for name in ("face", "arms", "rest"):
+    # per region: the front-facing held-out frames show the face, the arms, the torso, the legs and the outline
+    for name in ("face", "arms", "torso", "legs", "edge"):
         r = res["regions"][name]
         assert r["frames"] >= 1 and 0 < r["psnr"] < 99 and 0 < r["opacity"] <= 1 and -1 <= r["ssim"] <= 1
-    assert set(res["frames"][0]["regions"]) == {"rest", "face", "hands", "arms"}
+    assert set(res["frames"][0]["regions"]) == {"rest", "face", "hands", "arms", "torso", "legs", "edge"}
     assert res["worst"]["frames"] and res["worst"]["psnr_bbox"] <= res["mean"]["psnr_bbox"] + 1e-9
     assert list((tmp_path / "ev").glob("test_pose_*.png"))
     # synthetic sequences carry the true clothed mesh: the mesh layer is scored against it

@@ -10,7 +10,15 @@ import pytest
 import torch
 
 from gma.train.metrics import ssim, ssim_map
-from gma.train.regions import REGION_ORDER, RegionMapper, face_region_codes, mean_by_region, region_metrics
+from gma.train.regions import (
+    BODY_REGIONS,
+    REGION_ORDER,
+    RegionMapper,
+    edge_band,
+    face_region_codes,
+    mean_by_region,
+    region_metrics,
+)
 
 
 def _images(h=24, w=32, seed=0):
@@ -64,7 +72,8 @@ def test_region_map_of_the_body_from_the_front(gpu, anny_body):
     from gma.core.camera import Camera
 
     codes = face_region_codes(anny_body)
-    assert set(np.unique(codes)) == set(range(len(REGION_ORDER)))
+    # every named body region has faces; "rest" (code 0) is only what no body face covers
+    assert set(np.unique(codes)) == set(range(1, len(BODY_REGIONS)))
     rest = anny_body.rest_vertices(anny_body.canonical_params())
     lo, hi = rest.min(0).values.numpy(), rest.max(0).values.numpy()
     centre = (lo + hi) / 2
@@ -77,8 +86,37 @@ def test_region_map_of_the_body_from_the_front(gpu, anny_body):
     mask[0, 0] = 1.0
     maps = RegionMapper(gpu, anny_body).maps(rest, torch.from_numpy(cam.viewmat), torch.from_numpy(cam.K), mask)
     assert maps["rest"][0, 0]
-    for name in ("face", "hands", "arms", "rest"):
+    assert set(maps) == set(REGION_ORDER)
+    for name in ("face", "hands", "arms", "torso", "legs", "rest"):
         assert maps[name].sum() > 0, name
-    face_rows = np.nonzero(maps["face"].any(1))[0]
-    body_rows = np.nonzero((maps["rest"] | maps["arms"]).any(1))[0]
-    assert face_rows.mean() < body_rows.mean()  # the face above the body (image y grows downwards)
+    rows = {name: np.nonzero(maps[name].any(1))[0].mean() for name in ("face", "torso", "legs")}
+    assert rows["face"] < rows["torso"] < rows["legs"]  # top to bottom (image y grows downwards)
+    body = sum(maps[name].astype(int) for name in BODY_REGIONS)
+    assert body.max() == 1  # the body regions share no pixel
+
+
+def test_edge_band_straddles_the_outline():
+    """A 4×4 square in a 12×12 frame: the band is the pixels within 1 px of its outline, 1 px out and
+    1 px in (here all of the square but its middle 2×2), and nothing beyond."""
+    person = np.zeros((12, 12), bool)
+    person[4:8, 4:8] = True
+    band = edge_band(person, width=1)
+    expected = np.zeros((12, 12), bool)
+    expected[3:9, 3:9] = True
+    expected[5:7, 5:7] = False
+    assert np.array_equal(band, expected)
+    assert not edge_band(person, width=1)[0].any()
+
+
+@pytest.mark.parametrize("fill", [False, True])
+def test_edge_band_of_no_outline_is_empty(fill):
+    """An empty mask, or one that fills the frame (a person cut off by every border), has no outline."""
+    assert not edge_band(np.full((6, 6), fill)).any()
+
+
+def test_edge_band_ignores_the_frame_border():
+    """A person cut off by the bottom of the frame: the bottom row is not an outline."""
+    person = np.zeros((10, 10), bool)
+    person[5:, 3:7] = True
+    band = edge_band(person, width=1)
+    assert not band[9, 4:6].any() and band[9, 3] and band[5, 5]

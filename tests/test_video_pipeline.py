@@ -270,6 +270,7 @@ def test_pipeline_on_synthetic_clip(tmp_path, synth_clip, rig, anny_body):
     assert len(seq) == 10 and seq.body.model == "anny"
     assert read_sequence(out).body.arrays["pose"].shape == (10, 104, 4, 4)
     assert report["detection_rate"] == 1.0 and report["frames_interpolated"] == 0
+    assert report["frames_limbs_swapped"] == {"arms": 0, "legs": 0}  # a clean synthetic turn
     # Fitted model points against the truth, both projected into the same image.
     from gma.video.fit import project
 

@@ -126,9 +126,10 @@ def _estimate_video(args: argparse.Namespace, kw: dict) -> int:
         raise ValueError("--alpha/--mask-video need --body and a sequence's cameras.json (--camera); without them "
                          "give --mask-dir or no mask source (MediaPipe estimates the masks)")
     camera = _camera_intrinsics(args)
-    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
+    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2],
+                    smooth_frames=args.smooth_frames)
     cfg = VideoImportConfig(focal=args.focal, camera=camera, start=args.start, end=args.end, skip=args.skip,
-                            check_masks=not args.no_mask_check, fit=fit)
+                            check_masks=not args.no_mask_check, tracking=not args.per_frame, fit=fit)
     seq, report = estimate_sequence(args.src, args.out, config=cfg, mask_dir=args.mask_dir, body=args.body, **kw)
     err = report.get("reprojection_error_px_mean")
     print(f"wrote {seq.root}: {len(seq)} frames at {seq.width}x{seq.height}, body anny; person detected in "
@@ -173,9 +174,10 @@ def _import_motion(args: argparse.Namespace) -> int:
     from gma.video import FitConfig, VideoImportConfig
     from gma.video.motion import estimate_motion
 
-    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2])
+    fit = FitConfig(iters_root=args.fit_iters[0], iters_pose=args.fit_iters[1], iters_shape=args.fit_iters[2],
+                    smooth_frames=args.smooth_frames)
     cfg = VideoImportConfig(focal=args.focal, camera=_camera_intrinsics(args), start=args.start, end=args.end,
-                            skip=args.skip, fit=fit)
+                            skip=args.skip, tracking=not args.per_frame, fit=fit)
     motion, report = estimate_motion(source, out, config=cfg, overwrite=args.force, feet=args.feet)
     if args.fps is not None and abs(args.fps - motion.fps) > 1e-6:
         motion.pose = resample(motion.pose, motion.fps, args.fps)
@@ -257,6 +259,7 @@ def _register_video(fmt) -> None:
     vd.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 150],
                     metavar=("ROOT", "POSE", "SHAPE"),
                     help="body fit steps per stage (root only; all bones; bones + phenotype + silhouette)")
+    _smoothing(vd)
     masks = vd.add_mutually_exclusive_group(required=False)
     masks.add_argument("--alpha", action="store_true", help="masks from the video's alpha channel")
     masks.add_argument("--mask-video", default=None, help="a video of masks, one per frame")
@@ -265,6 +268,15 @@ def _register_video(fmt) -> None:
     vd.add_argument("--no-mask-check", action="store_true", help="keep MediaPipe's masks as they are (by default "
                     "they are checked against the background seen in other frames, for a fixed camera: holes in "
                     "clothing filled, halos over the background removed; a moving camera is detected and skipped)")
+
+
+def _smoothing(parser) -> None:
+    parser.add_argument("--smooth-frames", type=non_negative_int, default=0, metavar="N",
+                        help="video: smooth the landmarks over N frames either side before the body fit, without "
+                             "lag (a quadratic over the window; default 0: as detected). For --per-frame clips")
+    parser.add_argument("--per-frame", action="store_true",
+                        help="video: MediaPipe detects every frame on its own instead of tracking the person "
+                             "(its tracking filter lags a fast turn: for clips sampled sparsely in time)")
 
 
 def _register_motion(fmt) -> None:
@@ -289,3 +301,4 @@ def _register_motion(fmt) -> None:
                          "clip's lowest point (keeps jumps)")
     mo.add_argument("--fit-iters", type=positive_int, nargs=3, default=[60, 200, 60], metavar=("ROOT", "POSE", "SHAPE"),
                     help="video: body fit steps per stage")
+    _smoothing(mo)

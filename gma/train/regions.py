@@ -2,10 +2,14 @@
 face or see-through hands spoil an avatar that scores well over the image).
 
 Each pixel of a frame gets the region of the body face it shows: a face-ID render of the posed body mesh
-(:class:`gma.render.face_id.FaceIdRenderer`) at the frame's camera, its faces mapped to ``REGION_ORDER``
-through the body's coarse regions. The person's mask pixels that no body face covers (loose clothes,
-hair) count as ``rest``. ``face`` is the body's head region: from the views a person is filmed from it is
-mostly the face.
+(:class:`gma.render.face_id.FaceIdRenderer`) at the frame's camera, its faces mapped to ``BODY_REGIONS``
+through the body's coarse regions (``legs`` includes the feet). The person's mask pixels that no body
+face covers (loose clothes, hair) count as ``rest``. ``face`` is the body's head region: from the views a
+person is filmed from it is mostly the face.
+
+One more region crosses the others: ``edge``, the pixels within ``EDGE_PX`` of the boundary of the
+person's mask, on either side. A misplaced limb or a loose outline shows there first, so its score
+separates "the outline is wrong" from "the texture inside is wrong".
 
 Per region, :func:`region_metrics` gives PSNR and SSIM over the region's pixels, and the mean rendered
 opacity inside the target mask there (1 where the avatar is solid, lower where the background shows
@@ -23,20 +27,42 @@ import torch
 from gma.core.camera import Camera
 from gma.train.metrics import ssim_map
 
-__all__ = ["REGION_ORDER", "RegionMapper", "face_region_codes", "mean_by_region", "region_metrics"]
+__all__ = ["BODY_REGIONS", "EDGE_PX", "REGION_ORDER", "RegionMapper", "edge_band", "face_region_codes",
+           "mean_by_region", "region_metrics"]
 
-# Region names in the order of their codes; a face in none of the named body regions is "rest".
-REGION_ORDER = ("rest", "face", "hands", "arms")
-_BODY_REGION = {"face": "head", "hands": "hands", "arms": "arms"}
+# Region names of the body, in the order of their codes; a face in none of the named body regions is "rest".
+BODY_REGIONS = ("rest", "face", "hands", "arms", "torso", "legs")
+# Every region a frame is scored on: the body's, then the band along the mask's outline.
+REGION_ORDER = (*BODY_REGIONS, "edge")
+_BODY_REGION = {"face": ("head",), "hands": ("hands",), "arms": ("arms",), "torso": ("torso",),
+                "legs": ("legs", "feet")}
+# Half-width of the outline band in pixels: wide enough to hold a limb drawn a little off its place at the
+# evaluation's size, narrow enough to leave the texture inside the person out.
+EDGE_PX = 2
 
 
 def face_region_codes(body) -> np.ndarray:
-    """[F] int code of each body face's region (an index into ``REGION_ORDER``)."""
+    """[F] int code of each body face's region (an index into ``BODY_REGIONS``)."""
     codes = np.zeros(body.num_faces, np.int64)
-    for code, name in enumerate(REGION_ORDER):
-        if name in _BODY_REGION:
-            codes[body.region_mask(_BODY_REGION[name]).numpy().astype(bool)] = code
+    for code, name in enumerate(BODY_REGIONS):
+        for part in _BODY_REGION.get(name, ()):
+            if part in body.regions:  # a body without feet (or any part) leaves those faces to the rest
+                codes[body.region_mask(part).numpy().astype(bool)] = code
     return codes
+
+
+def edge_band(person: np.ndarray, width: int = EDGE_PX) -> np.ndarray:
+    """[H, W] bool: the pixels within ``width`` pixels (chessboard distance) of the boundary of the bool
+    mask ``person`` [H, W], inside or outside it. Empty when the mask is empty or fills the frame."""
+    from scipy.ndimage import binary_dilation, binary_erosion
+
+    if not person.any() or person.all():
+        return np.zeros_like(person, dtype=bool)
+    square = np.ones((3, 3), bool)
+    grown = binary_dilation(person, square, iterations=width)
+    # border_value=1: the frame's border is not an outline (a person cut off by the frame edge)
+    shrunk = binary_erosion(person, square, iterations=width, border_value=1)
+    return grown & ~shrunk
 
 
 class RegionMapper:
@@ -57,7 +83,7 @@ class RegionMapper:
         code = np.where(shown >= 0, self.codes[np.clip(shown, 0, None)], -1)
         person = mask[..., 0].numpy() > 0.5
         code[(code < 0) & person] = 0  # the person's pixels off the body mesh: clothes, hair
-        return {name: code == i for i, name in enumerate(REGION_ORDER)}
+        return {**{name: code == i for i, name in enumerate(BODY_REGIONS)}, "edge": edge_band(person)}
 
 
 def _masked_psnr(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor) -> float:

@@ -4,8 +4,14 @@
 Why Holistic with ``model_complexity=1``: its models ship inside the ``mediapipe`` wheel, so nothing
 is downloaded at run time (complexities 0 and 2 fetch their model on first use and fail offline), and
 its segmentation comes from the pose network, which is much cleaner on people than the separate
-``selfie_segmentation`` model. The face mesh is used only as a "face visible" cue for the left/right
-swap logic (``gma.video.swaps``); fitting Anny's facial actions to it is future work.
+``selfie_segmentation`` model. Two modes: tracking (each frame's search starts from the last one's
+person, landmarks smoothed by MediaPipe's causal filter) and per frame (``static_image_mode``: every
+frame on its own). The causal filter trails a fast-turning person (on a 16-frame synthetic turn the
+shoulders lagged 10-20° of turn in most frames); on real footage turning at a walking pace the two
+score alike (docs/fitting.md), so tracking stays the default. Per-frame detections jitter more; the
+import can smooth them from both sides in time (``gma.video.smooth``, ``--smooth-frames``). The face
+mesh is used only as a "face visible" cue for the left/right swap logic (``gma.video.swaps``); fitting
+Anny's facial actions to it is future work.
 
 Results are cached one ``.npz`` per frame (no pickle) under the run's work directory, keyed by the
 frame's pixels, so a second run (after a crash, or with other fit settings) skips detection.
@@ -28,7 +34,9 @@ __all__ = ["Detections", "MissingExtraError", "detect_frames", "require_mediapip
 
 NUM_POSE = 33
 NUM_HAND = 21
-_CACHE_VERSION = 1
+# Cache version of each mode's results (the per-frame mode came later, and a cache of one mode is never
+# read back as the other's).
+_CACHE_VERSION = {True: 1, False: 2}  # tracking: version
 
 
 class MissingExtraError(GmaError, ImportError):
@@ -118,8 +126,9 @@ def _frame_key(img: np.ndarray) -> str:
 
 
 def detect_frames(frames: np.ndarray, cache_dir: str | os.PathLike | None = None,
-                  progress: bool = True) -> tuple[Detections, int]:
-    """Run MediaPipe Holistic on frames uint8 [T, H, W, 3] in order (tracking between frames).
+                  progress: bool = True, tracking: bool = True) -> tuple[Detections, int]:
+    """Run MediaPipe Holistic on frames uint8 [T, H, W, 3] in order, tracking the person from frame to
+    frame (``tracking``) or detecting each frame on its own.
 
     Frames whose cached result (``cache_dir/000123.npz`` with a matching pixel hash) exists are not
     detected again. Returns (detections, number of frames reused from the cache).
@@ -136,19 +145,19 @@ def detect_frames(frames: np.ndarray, cache_dir: str | os.PathLike | None = None
             path = cache / f"{t:06d}.npz" if cache is not None else None
             if path is not None and path.is_file():
                 with np.load(path, allow_pickle=False) as z:
-                    if str(z["key"]) == key and int(z["version"]) == _CACHE_VERSION:
+                    if str(z["key"]) == key and int(z["version"]) == _CACHE_VERSION[tracking]:
                         results.append({k: z[k] for k in z.files})
                         reused += 1
                         continue
             if holistic is None:
                 mp = mp or require_mediapipe()
                 holistic = mp.solutions.holistic.Holistic(
-                    static_image_mode=False, model_complexity=1, enable_segmentation=True,
+                    static_image_mode=not tracking, model_complexity=1, enable_segmentation=True,
                     smooth_landmarks=True, refine_face_landmarks=False,
                 )
             res = _detect_one(holistic, img)
             if path is not None:
-                atomic_write_npz(path, key=np.array(key), version=np.array(_CACHE_VERSION), **res)
+                atomic_write_npz(path, key=np.array(key), version=np.array(_CACHE_VERSION[tracking]), **res)
             results.append(res)
     finally:
         if holistic is not None:

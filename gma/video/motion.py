@@ -89,7 +89,7 @@ def estimate_motion(src: str | os.PathLike, out: str | os.PathLike, *, config: V
     frames, K, _ = video_camera(frames, cfg)
     work = work_dir(out)
     with reusable_work(work):
-        det, reused = detect_person(src, frames, work, progress, timings)
+        det, reused = detect_person(src, frames, work, progress, timings, cfg.tracking)
         # The body fit's silhouette term (body shape) sees the masks checked against the background.
         masks, mask_check = checked_masks(frames, det.masks, cfg, progress, timings)
         pose, phenotype, info = fit_detections(det, masks, K, cfg, work, anny, progress, timings)

@@ -38,7 +38,8 @@ from gma.video.frames import memory_budget, read_video
 from gma.video.matte import refine_masks
 from gma.video.report import contact_sheet, mask_iou, overlay, project_vertices, reprojection_errors, silhouette
 from gma.video.rig import AnnyRig
-from gma.video.swaps import apply_swaps, resolve_swaps
+from gma.video.smooth import smooth_landmarks
+from gma.video.swaps import LIMB_PAIRS, apply_limb_swaps, apply_swaps, resolve_limb_swaps, resolve_swaps
 from gma.video.targets import build_targets
 
 __all__ = ["VideoImportConfig", "estimate_sequence", "work_dir"]
@@ -60,6 +61,7 @@ class VideoImportConfig:
     max_decoded_bytes: int | None = field(default_factory=memory_budget)  # of decoded frames (gma.video.frames)
     sheet_frames: int = 12  # overlays on the contact sheet
     check_masks: bool = True  # MediaPipe's masks checked against the background plate (gma.video.matte)
+    tracking: bool = True  # MediaPipe tracks the person from frame to frame (else: each frame on its own)
     fit: FitConfig = field(default_factory=FitConfig)
 
 
@@ -102,8 +104,9 @@ def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, in
 
 
 # Bumped when the body fit changes in a way its settings do not show (2: per-pair weights of the 3D
-# directions), so that OUT.work/ never hands back a fit the current code would not make.
-FIT_CACHE_VERSION = 2
+# directions; 3: limb swaps resolved and landmarks smoothed before the fit), so that OUT.work/ never hands
+# back a fit the current code would not make.
+FIT_CACHE_VERSION = 3
 
 
 def _fit_key(det, K: np.ndarray, cfg: FitConfig) -> str:
@@ -159,11 +162,11 @@ def reusable_work(work: Path) -> Iterator[Path]:
                         "them, delete it to start over)") from None
 
 
-def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, timings: dict):
+def detect_person(src: Path, frames: np.ndarray, work: Path, progress: bool, timings: dict, tracking: bool = True):
     """MediaPipe detections of ``frames`` [T, H, W, 3] (cached in ``work/detect``): (detections, frames
     reused from the cache). No person in any frame is an :class:`InputError` naming ``src``."""
     t0 = time.perf_counter()
-    det, reused = detect_frames(frames, work / "detect", progress=progress)
+    det, reused = detect_frames(frames, work / "detect", progress=progress, tracking=tracking)
     timings["detect"] = time.perf_counter() - t0
     if not det.found.any():
         raise InputError(f"{src}: no person detected in any of the {len(frames)} frames")
@@ -193,7 +196,7 @@ def _estimate(src, out, frames, K, undistort, idx, n_src, work, cfg, mask_dir, b
         if undistort is not None:  # the user's masks are of the distorted frames
             masks = np.stack([undistort(m) for m in masks])
         mask_check = {"applied": False, "reason": "the user's masks"}
-    det, reused = detect_person(src, frames, work, progress, timings)
+    det, reused = detect_person(src, frames, work, progress, timings, cfg.tracking)
     if mask_dir is None:
         masks, mask_check = checked_masks(frames, det.masks, cfg, progress, timings)
 
@@ -264,8 +267,7 @@ def fit_detections(det, masks, K, cfg: VideoImportConfig, work: Path, anny, prog
     """Anny fitted to detections ``det`` and ``masks`` [T, H, W] for camera ``K``: (pose [T, J, 4, 4] in
     the camera's frame, phenotype [6], fit info), cached in ``work`` by its inputs and settings."""
     t0 = time.perf_counter()
-    swaps = resolve_swaps(det.pose3d, det.found, det.face)
-    p2, p3, h2 = apply_swaps(det.pose2d, det.pose3d, det.hands2d, swaps)
+    p2, p3, h2, swaps, limb_swaps = clean_landmarks(det, cfg.fit.smooth_frames)
     key = _fit_key(det, K, cfg.fit) + hashlib.sha1(np.ascontiguousarray(masks).tobytes()).hexdigest()[:8]
     cache = work / f"fit_{key}.npz"
     if anny is None:
@@ -284,9 +286,23 @@ def fit_detections(det, masks, K, cfg: VideoImportConfig, work: Path, anny, prog
         atomic_write_npz(cache, pose=pose, phenotype=phenotype, uv=uv)
         resumed = False
     timings["fit"] = time.perf_counter() - t0
-    info = {"uv": uv, "target_uv": tg.uv.numpy(), "conf": tg.conf.numpy(), "swapped": swaps,
-            "resumed_fit": resumed, "points": rig.point_names}
+    # The report scores the fit against the landmarks as detected (swaps undone), not the smoothed ones.
+    seen = build_targets(rig.point_names, *clean_landmarks(det, 0)[:3], det.found, use_hands=cfg.fit.fit_hands)
+    info = {"uv": uv, "target_uv": seen.uv.numpy(), "conf": seen.conf.numpy(), "swapped": swaps,
+            "limbs_swapped": limb_swaps, "resumed_fit": resumed, "points": rig.point_names}
     return pose, phenotype, info
+
+
+def clean_landmarks(det, smooth_frames: int):
+    """The detections' landmarks made ready for the fit: left/right swaps of the whole body (back views)
+    and of single limb pairs (profiles) undone, then the tracks smoothed over ``smooth_frames`` frames
+    either side (0: not). Returns (pose2d, pose3d, hands2d, body swaps [T] bool, {limb: [T] bool})."""
+    swaps = resolve_swaps(det.pose3d, det.found, det.face)
+    p2, p3, h2 = apply_swaps(det.pose2d, det.pose3d, det.hands2d, swaps)
+    limb_swaps = {limb: resolve_limb_swaps(p2, p3, det.found, limb) for limb in LIMB_PAIRS}
+    p2, p3, h2 = apply_limb_swaps(p2, p3, h2, limb_swaps)
+    p2, p3, h2 = smooth_landmarks(p2, p3, h2, det.found, smooth_frames)
+    return p2, p3, h2, swaps, limb_swaps
 
 
 def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_info, cfg,
@@ -336,6 +352,7 @@ def _report(src, frames, masks, det, idx, reused, pose, phenotype, cams, fit_inf
             "reprojection_error_px_mean": round(float(np.nanmean(err)), 3) if np.isfinite(err).any() else None,
             "reprojection_error_px_per_frame": [None if not np.isfinite(e) else round(float(e), 3) for e in err],
             "frames_swapped_left_right": int(fit_info["swapped"].sum()),
+            "frames_limbs_swapped": {k: int(v.sum()) for k, v in fit_info["limbs_swapped"].items()},
             "fit_resumed_from_cache": bool(fit_info["resumed_fit"]),
             "fit_config": dataclasses.asdict(cfg.fit),
         })
