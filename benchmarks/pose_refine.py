@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 
-def _root_error(poses, truth) -> tuple[float, float]:
+def root_error(poses, truth) -> tuple[float, float]:
     """Mean root rotation error (degrees) and root position error (cm) of [T, J, 4, 4] poses."""
     import roma
 
@@ -34,7 +34,7 @@ def _root_error(poses, truth) -> tuple[float, float]:
     return float(ang.mean()), float((poses[:, 0, :3, 3] - truth[:, 0, :3, 3]).norm(dim=-1).mean() * 100)
 
 
-def _perturb(pose: np.ndarray, frames, angle: float = 0.1, shift: float = 0.02) -> np.ndarray:
+def perturb_root(pose: np.ndarray, frames, angle: float = 0.1, shift: float = 0.02) -> np.ndarray:
     """``pose`` with the root of ``frames`` turned by ±``angle`` about the vertical and moved ±``shift``."""
     import roma
     import torch
@@ -65,7 +65,7 @@ def _repeated_sequence(seq, root: Path):
     arrays = {k: np.array(v) for k, v in seq.body.arrays.items()}
     arrays["pose"][1:4] = arrays["pose"][0]
     truth = arrays["pose"].copy()
-    arrays["pose"] = _perturb(truth, [1, 3])
+    arrays["pose"] = perturb_root(truth, [1, 3])
     save_body(root / "body.npz", type(seq.body)("anny", arrays))
     return read_sequence(root), torch.as_tensor(truth[:4])
 
@@ -87,13 +87,13 @@ def alignment_pass(seq, work: Path, body, ctx, args) -> None:
     from gma.train.trainer import refined_body_path
 
     rep, truth = _repeated_sequence(seq, work / "repeated")
-    before = _root_error(torch.as_tensor(rep.body.arrays["pose"][:4]), truth)
+    before = root_error(torch.as_tensor(rep.body.arrays["pose"][:4]), truth)
     print(f"1. fit-time refinement, root error as given: {before[0]:.2f} deg, {before[1]:.2f} cm")
     for align in (0, args.align_steps):
         out = work / f"align{align}.gma"
         _fit(rep, out, body, ctx, args.size, stage1_steps=args.align_fit_steps, stage2_steps=2,
              pose={"refine": "on", "smooth": 0.0, "prior": 0.1, "align": align, "bones": "video"})
-        err = _root_error(torch.as_tensor(load_body(refined_body_path(out)).arrays["pose"][:4]), truth)
+        err = root_error(torch.as_tensor(load_body(refined_body_path(out)).arrays["pose"][:4]), truth)
         label = "joint steps alone" if align == 0 else f"with a {align}-step alignment pass"
         print(f"   {label}: {err[0]:.2f} deg, {err[1]:.2f} cm")
 
@@ -128,7 +128,7 @@ def test_time_mse(decoded, frames, psnr, body, ctx, args) -> None:
 
     truth = frames.poses.clone()
     frames = copy.copy(frames)
-    frames.poses = torch.as_tensor(_perturb(truth.numpy(), [0]))
+    frames.poses = torch.as_tensor(perturb_root(truth.numpy(), [0]))
     cfg = PoseRefineConfig(bones="video")
     with_mse = refine_frozen(decoded, body, frames, args.refine_steps, cfg, 0.5, ctx).all_poses()
     plain = PoseCorrections(body, frames.poses, frames.indices, BONE_SETS["video"])
@@ -136,7 +136,7 @@ def test_time_mse(decoded, frames, psnr, body, ctx, args) -> None:
     print("2. test-time fitting of a perturbed frame:")
     for label, poses in (("as perturbed", frames.poses), ("L1 + SSIM", plain.all_poses()),
                          ("L1 + SSIM + MSE (default)", with_mse)):
-        deg, cm = _root_error(poses, truth)
+        deg, cm = root_error(poses, truth)
         print(f"   {label:26s} PSNR {psnr(poses):6.2f} dB, root error {deg:.2f} deg, {cm:.2f} cm")
 
 

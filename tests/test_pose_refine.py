@@ -9,6 +9,8 @@ from __future__ import annotations
 import copy
 import json
 import shutil
+import sys
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -19,6 +21,11 @@ import torch
 from gma.core.errors import InputError
 from gma.train.metrics import box_metrics, mask_iou, person_box, psnr, ssim
 from gma.train.pose_refine import PoseRefineConfig, apply_corrections, blurred, coarse_sigma, refine_wanted
+
+# The injected errors and their measure are the benchmark's (benchmarks/pose_refine.py), so that the
+# figures it prints and what these tests assert are about the same cases.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from pose_refine import perturb_root, root_error  # noqa: E402
 
 # -- fast: formulas against references ----------------------------------------------------------------
 
@@ -118,23 +125,6 @@ def seq(tiny_sequence):
     return tiny_sequence(0)
 
 
-def _root_error(poses: torch.Tensor, truth: torch.Tensor) -> tuple[float, float]:
-    """Mean root rotation error (degrees) and root position error (cm) of [T, J, 4, 4] poses."""
-    ang = roma.rotmat_geodesic_distance(poses[:, 0, :3, :3], truth[:, 0, :3, :3]).rad2deg()
-    return float(ang.mean()), float((poses[:, 0, :3, 3] - truth[:, 0, :3, 3]).norm(dim=-1).mean() * 100)
-
-
-def _perturb(pose: np.ndarray, frames, angle: float = 0.1, shift: float = 0.02) -> np.ndarray:
-    """``pose`` with the root of ``frames`` turned by ±``angle`` about the vertical and moved ±``shift``."""
-    out = pose.copy()
-    for k, i in enumerate(frames):
-        sgn = 1 if k % 2 == 0 else -1
-        r = roma.rotvec_to_rotmat(torch.tensor([0.0, 0.0, angle * sgn])).numpy()
-        out[i, 0, :3, :3] = r @ out[i, 0, :3, :3]
-        out[i, 0, 0, 3] += shift * sgn
-    return out
-
-
 @pytest.fixture(scope="module")
 def repeated_seq(seq, tmp_path_factory):
     """Training frames 0-3 all show frame 0 (same image, camera and true pose), but frames 1 and 3 carry
@@ -154,7 +144,7 @@ def repeated_seq(seq, tmp_path_factory):
     arrays = {k: np.array(v) for k, v in seq.body.arrays.items()}
     arrays["pose"][1:4] = arrays["pose"][0]
     truth = arrays["pose"].copy()
-    arrays["pose"] = _perturb(truth, [1, 3])
+    arrays["pose"] = perturb_root(truth, [1, 3])
     save_body(root / "body.npz", type(seq.body)("anny", arrays))
     return read_sequence(root), torch.as_tensor(truth[:4])
 
@@ -176,8 +166,8 @@ def test_fit_refinement_reduces_injected_error(repeated_seq, anny_body, gpu, tmp
     _fit(s, tmp_path / "a.gma", anny_body, gpu, stage1_steps=100,
          pose={"refine": "on", "smooth": 0.0, "prior": 0.1, "lr_rotation": 0.02, "lr_translation": 0.01})
     refined = load_body(refined_body_path(tmp_path / "a.gma"), num_frames=len(s))  # a valid body.npz
-    before = _root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
-    after = _root_error(torch.as_tensor(refined.arrays["pose"][:4]), truth)
+    before = root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
+    after = root_error(torch.as_tensor(refined.arrays["pose"][:4]), truth)
     assert after[0] < 0.8 * before[0] and after[1] < 0.8 * before[1], (before, after)
     # held-out frames keep their input poses; the summary lands in metrics.json
     assert np.array_equal(refined.arrays["pose"][4:], s.body.arrays["pose"][4:])
@@ -201,8 +191,8 @@ def test_alignment_pass_fits_the_training_poses(repeated_seq, anny_body, gpu, tm
         _fit(s, out, anny_body, gpu, stage1_steps=30, stage2_steps=2,
              pose={"refine": "on", "smooth": 0.0, "prior": 0.1, "align": align, "bones": "video"})
         poses[align] = torch.as_tensor(load_body(refined_body_path(out)).arrays["pose"][:4])
-    before = _root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
-    aligned = _root_error(poses[20], truth)
+    before = root_error(torch.as_tensor(s.body.arrays["pose"][:4]), truth)
+    aligned = root_error(poses[20], truth)
     assert not torch.allclose(poses[20], poses[0], atol=1e-5)  # the pass takes part
     assert aligned[0] < 0.8 * before[0], (before, aligned)
     metrics = {a: json.loads((work_dir(tmp_path / f"a{a}.gma") / "metrics.json").read_text()) for a in poses}
@@ -328,14 +318,14 @@ def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu
     decoded, frames, score = frozen_frame
     truth = frames.poses.clone()
     frames = copy.copy(frames)
-    frames.poses = torch.as_tensor(_perturb(truth.numpy(), [0]))
+    frames.poses = torch.as_tensor(perturb_root(truth.numpy(), [0]))
     # The video fit's bones: the root error injected here is theirs to correct (measured on them; the
     # default set's extra bones take a share of a root turn on this tiny 64 px frame).
     cfg = PoseRefineConfig(bones="video")
     corr = refine_frozen(decoded, anny_body, frames, 25, cfg, 0.5, gpu)
     refined = corr.all_poses()
     assert score(refined)["psnr"] > score(frames.poses)["psnr"] + 2
-    before, after = _root_error(frames.poses, truth), _root_error(refined, truth)
+    before, after = root_error(frames.poses, truth), root_error(refined, truth)
     assert after[0] < 0.7 * before[0], (before, after)
     # The squared colour error (TEST_TIME_MSE) is part of test-time fitting's loss: without it the same
     # steps end elsewhere, and that plain fit corrects the frame too. Which of the two ends better on this
