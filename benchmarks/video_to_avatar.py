@@ -21,7 +21,7 @@ Each part ends with one table of where the held-out error goes (``cause_table``;
 ``--work``/``synth_causes.md`` and ``iper_causes.md``, and shown in docs/fitting.md): per avatar, the held-out
 bbox PSNR, the mean of its worst 5 frames, and PSNR by body region of ``gma eval`` (face, hands, arms,
 torso, legs, what no body face covers, and the band along the mask's outline), mask IoU and the rendered
-opacity on the outline band. ``--resolutions`` and ``--steps-factors`` add rows of the refined
+opacity and coverage on the outline band. ``--resolutions`` and ``--steps-factors`` add rows of the refined
 estimated-pose synthetic avatar fitted at other training resolutions or with more or fewer steps;
 ``--iper-fits on`` makes only the refined iPER fit.
 
@@ -140,15 +140,15 @@ def cause_table(rows: list[tuple[str, dict]]) -> str:
     test-time pose fitting where it ran."""
     from gma.train.regions import REGION_ORDER
 
-    head = ["avatar", "bbox PSNR", "worst 5", *REGION_ORDER, "mask IoU", "edge opacity"]
+    head = ["avatar", "bbox PSNR", "worst 5", *REGION_ORDER, "mask IoU", "edge opacity", "edge coverage"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for label, res in rows:
         r = _scored(res)
         regions = r["regions"]
         cells = [label, f"{r['mean']['psnr_bbox']:.2f}", f"{r['worst']['psnr_bbox']:.2f}"]
         cells += ["–" if regions[n]["psnr"] is None else f"{regions[n]['psnr']:.2f}" for n in REGION_ORDER]
-        edge = regions["edge"]["opacity"]
-        cells += [f"{r['mean']['mask_iou']:.3f}", "–" if edge is None else f"{edge:.3f}"]
+        edge = [regions["edge"].get(k) for k in ("opacity", "coverage")]  # (no coverage in older scores)
+        cells += [f"{r['mean']['mask_iou']:.3f}", *("–" if v is None else f"{v:.3f}" for v in edge)]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

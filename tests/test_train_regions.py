@@ -40,7 +40,24 @@ def test_region_scores_follow_their_own_pixels():
     assert scores["face"]["psnr"] == 99.0 and scores["face"]["opacity"] == 1.0
     assert scores["hands"]["psnr"] == pytest.approx(20.0, abs=1e-3)  # 10 log10(1 / 0.1^2)
     assert scores["hands"]["opacity"] == pytest.approx(0.5)
+    assert scores["hands"]["coverage"] == pytest.approx(0.5) and scores["face"]["coverage"] == 1.0
     assert scores["face"]["ssim"] > scores["hands"]["ssim"]
+
+
+def test_coverage_tells_an_anti_aliased_outline_from_a_see_through_one():
+    render, target = _images()
+    mask = torch.zeros(24, 32, 1)
+    mask[4:20, 4:28] = 1.0
+    mask[4:20, 27] = 0.6  # the outline's column: the person covers 60 % of those pixels
+    band = np.zeros((24, 32), bool)
+    band[:, 26:29] = True
+    exact = region_metrics(render, target, mask.clone(), mask, {"edge": band})["edge"]
+    assert exact["coverage"] == pytest.approx(1.0)
+    assert exact["opacity"] == pytest.approx(0.8)  # (1 + 0.6) / 2: below 1 though nothing is missing
+    thin = region_metrics(render, target, mask * 0.5, mask, {"edge": band})["edge"]
+    assert thin["coverage"] == pytest.approx(0.5) and thin["opacity"] == pytest.approx(0.4)
+    fat = region_metrics(render, target, torch.ones(24, 32, 1), mask, {"edge": band})["edge"]
+    assert fat["coverage"] == pytest.approx(1.0)  # more than the target's cover is not more coverage
 
 
 def test_a_region_the_frame_does_not_show_is_absent_not_nan():
@@ -50,10 +67,10 @@ def test_a_region_the_frame_does_not_show_is_absent_not_nan():
     outside_mask[0, 0] = True
     mask = torch.zeros(24, 32, 1)  # the person covers nothing: no opacity to average
     scores = region_metrics(render, target, torch.ones(24, 32, 1), mask, {"hands": nowhere, "face": outside_mask})
-    assert scores["hands"] == {"psnr": None, "ssim": None, "opacity": None}
+    assert scores["hands"] == {"psnr": None, "ssim": None, "opacity": None, "coverage": None}
     assert scores["face"]["psnr"] == 99.0 and scores["face"]["opacity"] is None
     means = mean_by_region([scores, scores])
-    assert means["hands"] == {"psnr": None, "ssim": None, "opacity": None, "frames": 0}
+    assert means["hands"] == {"psnr": None, "ssim": None, "opacity": None, "coverage": None, "frames": 0}
     assert means["face"]["frames"] == 2
     assert not any(isinstance(v, float) and math.isnan(v) for r in means.values() for v in r.values())
 

@@ -11,9 +11,18 @@ One more region crosses the others: ``edge``, the pixels within ``EDGE_PX`` of t
 person's mask, on either side. A misplaced limb or a loose outline shows there first, so its score
 separates "the outline is wrong" from "the texture inside is wrong".
 
-Per region, :func:`region_metrics` gives PSNR and SSIM over the region's pixels, and the mean rendered
-opacity inside the target mask there (1 where the avatar is solid, lower where the background shows
-through). A region that no pixel of the frame shows is reported as absent (None), never as NaN, and
+Per region, :func:`region_metrics` gives PSNR and SSIM over the region's pixels, and two measures of
+how solid the avatar is inside the person's mask (``mask`` > 0.5) there:
+
+- ``opacity``: the mean rendered alpha (1 where the avatar is solid, lower where the background shows
+  through);
+- ``coverage``: how much of the target's own soft mask the render covers, ``Σ min(alpha, m) / Σ m``. The
+  target's outline is soft (a pixel the person half covers has ``m`` = 0.5–0.9), so a render that matches
+  it exactly has an opacity well below 1 on the outline and a coverage of 1; a see-through limb
+  (``alpha`` 0.5 where ``m`` = 1) lowers both alike. Regions that lie mostly on the outline (``rest``,
+  ``edge``) need this one to tell "see-through" from "anti-aliased".
+
+A region that no pixel of the frame shows is reported as absent (None), never as NaN, and
 :func:`mean_by_region` averages over the frames that show it.
 """
 
@@ -93,11 +102,14 @@ def _masked_psnr(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor) -> float:
 
 def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tensor, mask: torch.Tensor,
                    regions: dict[str, np.ndarray]) -> dict[str, dict[str, float | None]]:
-    """{region: {"psnr", "ssim", "opacity"}} of [H, W, 3] ``render`` against ``target`` over each region's
-    pixels; ``opacity`` is the mean rendered ``alpha`` [H, W, 1] inside ``mask`` [H, W, 1] > 0.5 there.
+    """{region: {"psnr", "ssim", "opacity", "coverage"}} of [H, W, 3] ``render`` against ``target`` over
+    each region's pixels; ``opacity`` is the mean rendered ``alpha`` [H, W, 1] inside ``mask`` [H, W, 1]
+    > 0.5 there, ``coverage`` the share of the soft mask there that ``alpha`` covers (module docstring).
     None for what the frame does not show."""
     similarity = ssim_map(render, target)
-    person = mask[..., 0] > 0.5
+    soft = mask[..., 0].clamp(0, 1)
+    person = soft > 0.5
+    covered = torch.minimum(alpha[..., 0], soft)
     out = {}
     for name, where in regions.items():
         m = torch.from_numpy(where)
@@ -105,7 +117,8 @@ def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tens
         shown = bool(m.any())
         out[name] = {"psnr": _masked_psnr(render, target, m) if shown else None,
                      "ssim": float(similarity[m].mean()) if shown else None,
-                     "opacity": float(alpha[..., 0][inside].mean()) if bool(inside.any()) else None}
+                     "opacity": float(alpha[..., 0][inside].mean()) if bool(inside.any()) else None,
+                     "coverage": float(covered[inside].sum() / soft[inside].sum()) if bool(inside.any()) else None}
     return out
 
 
