@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import roma
 import torch
 
 # Bounds for a 10-frame, 192 px synthetic turn (36° per frame, back views included).
@@ -254,6 +255,61 @@ def test_fit_recovers_gt_landmarks(synth_clip, rig):
                    progress=False)
     assert res.pose.shape == (T, 104, 4, 4) and np.isfinite(res.pose).all()
     assert _joint_error(rig, res.uv, gt) < GT_LANDMARK_PX
+
+
+def _eye_line(rig, pose: torch.Tensor, rest, w2c: np.ndarray) -> np.ndarray:
+    """[T, 3] unit direction from the right eye to the left in camera axes."""
+    with torch.no_grad():
+        pts = rig.points(rig.transforms(pose, rest), rest).numpy()
+    d = pts[:, rig.index("coco:left_eye")] - pts[:, rig.index("coco:right_eye")]
+    d = d @ w2c[:3, :3].T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def test_face_mesh_directions_turn_the_head(synth_clip, rig, anny_body):
+    """The body's 2D landmarks say nothing of the head (its points are left out); the face mesh's 3D eye
+    and nose lines, taken from the same frames with the head turned 0.5 rad, must turn the fitted head."""
+    from gma.video.fit import FitConfig, fit_body
+    from gma.video.landmarks import FACE_POINTS
+    from gma.video.targets import build_targets
+
+    seq, _ = synth_clip
+    T = 2
+    pose = torch.as_tensor(seq.body.arrays["pose"][:T]).float()
+    rest = rig.rest(torch.as_tensor(seq.body.arrays["phenotype"]).float())
+    turned = pose.clone()
+    head = anny_body.bone_index("head")
+    turn = roma.rotvec_to_rotmat(torch.tensor([0.0, 0.0, 0.5]))
+    turned[:, head, :3, :3] = turned[:, head, :3, :3] @ turn
+    _, w2c = seq.cameras.frame(0)
+    moved = np.degrees(np.arccos(np.clip((_eye_line(rig, pose, rest, w2c)
+                                          * _eye_line(rig, turned, rest, w2c)).sum(-1), -1, 1)))
+    assert (moved > 10).all(), moved  # the turn shows in the eye line
+    with torch.no_grad():
+        face_pts = rig.points(rig.transforms(turned, rest), rest)[:, [rig.index(n) for n in FACE_POINTS]]
+        body_pts = rig.points(rig.transforms(pose, rest), rest).numpy()
+    face3d = face_pts.numpy() @ w2c[:3, :3].T * 1000  # any scale: only directions count
+    torso = np.full((T, 33, 3), np.nan)  # the torso's world landmarks start the root (as in the test above)
+    for mp_i, name in {11: "coco:left_shoulder", 12: "coco:right_shoulder", 23: "coco:left_hip",
+                       24: "coco:right_hip"}.items():
+        torso[:, mp_i] = body_pts[:, rig.index(name)] @ w2c[:3, :3].T
+
+    def fitted_eye_error(face):
+        tg = build_targets(rig.point_names, np.zeros((T, 33, 3)), np.full((T, 33, 3), np.nan),
+                           np.zeros((T, 2, 21, 3)), np.ones(T, bool), face3d=face)
+        body = [rig.index(n) for n in BODY_JOINTS if n != "coco:nose"]
+        tg.uv[:] = torch.as_tensor(_gt_uv(rig, seq)[:T])
+        tg.conf[:, body] = 1.0
+        tg.scale[:] = 150.0
+        res = fit_body(rig, tg, torso, seq.cameras.frame(0)[0], None,
+                       FitConfig(iters_root=30, iters_pose=150, iters_shape=0), progress=False)
+        from gma.video.camera import CAMERA_FROM_WORLD
+
+        got = _eye_line(rig, torch.as_tensor(res.pose), rest, np.pad(CAMERA_FROM_WORLD, ((0, 1), (0, 1))))
+        return np.degrees(np.arccos(np.clip((got * _eye_line(rig, turned, rest, w2c)).sum(-1), -1, 1)))
+
+    with_face, without = fitted_eye_error(face3d), fitted_eye_error(None)
+    assert with_face.max() < 5 and without.mean() > 10, (with_face, without)
 
 
 # -- the whole pipeline (MediaPipe) -----------------------------------------------------------------

@@ -10,8 +10,10 @@ frame on its own). The causal filter trails a fast-turning person (on a 16-frame
 shoulders lagged 10-20° of turn in most frames); on real footage turning at a walking pace the two
 score alike (docs/fitting.md), so tracking stays the default. Per-frame detections jitter more; the
 import can smooth them from both sides in time (``gma.video.smooth``, ``--smooth-frames``). The face
-mesh is used only as a "face visible" cue for the left/right swap logic (``gma.video.swaps``); fitting
-Anny's facial actions to it is future work.
+mesh is a "face visible" cue for the left/right swap logic (``gma.video.swaps``), and three of its
+points in 3D (the eyes' centres and the nose tip) give the head's orientation to the body fit: the
+depth between the eyes says how far the head is turned, which the pose landmarks' 2D eyes and ears
+leave loose in three-quarter views. Fitting Anny's facial actions to it is future work.
 
 Results are cached one ``.npz`` per frame (no pickle) under the run's work directory, keyed by the
 frame's pixels, so a second run (after a crash, or with other fit settings) skips detection.
@@ -34,9 +36,13 @@ __all__ = ["Detections", "MissingExtraError", "detect_frames", "require_mediapip
 
 NUM_POSE = 33
 NUM_HAND = 21
+# Face mesh landmarks averaged into the face points: the person's left eye (outer, inner corner), right
+# eye, nose tip. The order is FACE_POINTS' (gma.video.landmarks).
+FACE_MESH_POINTS = ((263, 362), (33, 133), (1,))
 # Cache version of each mode's results (the per-frame mode came later, and a cache of one mode is never
 # read back as the other's).
-_CACHE_VERSION = {True: 1, False: 2}  # tracking: version
+# 3, 4: the face points were added.
+_CACHE_VERSION = {True: 3, False: 4}  # tracking: version
 
 
 class MissingExtraError(GmaError, ImportError):
@@ -68,6 +74,9 @@ class Detections:
     hands2d: [T, 2, 21, 3] left, right hand landmarks (x, y px, 1 = present / 0 = absent); "left" is the
              person's left, as for the pose landmarks
     face:    [T] bool, a face mesh was found (a frontal-view cue)
+    face3d:  [T, 3, 3] the person's left eye centre, right eye centre and nose tip from the face mesh, in
+             pixels along the camera's axes (x right, y down, z away; MediaPipe's depth is in the units of
+             x), NaN where no face was found: only directions between them are used
     masks:   [T, H, W] float32 person probability in [0, 1]
     """
 
@@ -76,6 +85,7 @@ class Detections:
     pose3d: np.ndarray
     hands2d: np.ndarray
     face: np.ndarray
+    face3d: np.ndarray
     masks: np.ndarray
 
     def __len__(self) -> int:
@@ -100,6 +110,17 @@ def _landmarks(lms, n: int, w: int, h: int, world: bool = False) -> np.ndarray:
     return out
 
 
+def _face_points(lms, w: int, h: int) -> np.ndarray:
+    """[3, 3] FACE_MESH_POINTS of a face mesh, in pixels along the camera's axes; NaN without one."""
+    out = np.full((len(FACE_MESH_POINTS), 3), np.nan, np.float32)
+    if lms is None:
+        return out
+    for k, group in enumerate(FACE_MESH_POINTS):
+        pts = [lms.landmark[i] for i in group]
+        out[k] = np.mean([(p.x * w, p.y * h, p.z * w) for p in pts], axis=0)
+    return out
+
+
 def _detect_one(holistic, img: np.ndarray) -> dict[str, np.ndarray]:
     h, w = img.shape[:2]
     r = holistic.process(np.ascontiguousarray(img))
@@ -116,6 +137,7 @@ def _detect_one(holistic, img: np.ndarray) -> dict[str, np.ndarray]:
         "pose3d": _landmarks(r.pose_world_landmarks, NUM_POSE, w, h, world=True),
         "hands2d": hands,
         "face": np.array(r.face_landmarks is not None),
+        "face3d": _face_points(r.face_landmarks, w, h),
         # uint8 in the cache: 4× smaller and plenty for a probability that is thresholded later.
         "mask": np.clip(np.round(np.asarray(mask, np.float32) * 255), 0, 255).astype(np.uint8),
     }
@@ -168,5 +190,6 @@ def detect_frames(frames: np.ndarray, cache_dir: str | os.PathLike | None = None
         pose3d=np.stack([r["pose3d"] for r in results]).astype(np.float32),
         hands2d=np.stack([r["hands2d"] for r in results]).astype(np.float32),
         face=np.array([bool(r["face"]) for r in results]),
+        face3d=np.stack([r["face3d"] for r in results]).astype(np.float32),
         masks=np.stack([r["mask"] for r in results]).astype(np.float32) / 255.0,
     ), reused

@@ -7,7 +7,8 @@ Energy (summed over frames; each term normalised so the weights are comparable):
   the person's size in pixels, with a Charbonnier (smooth L1) penalty so a few wrong landmarks do not
   dominate;
 - 3D bone directions against MediaPipe's world landmarks (1 − cos), which fixes what one view cannot:
-  whether a forearm points towards or away from the camera;
+  whether a forearm points towards or away from the camera; and the same for the face's eye line and
+  eyes-to-nose lines against the face mesh where a face was found (the head's turn, roll and nod);
 - mask silhouette (``gma.video.silhouette``) on a few random frames per step, in the last stage;
 - temporal smoothness of the model points (metres²) and root translation;
 - soft joint limits (per-bone rotation angle beyond ``gma.video.rig.ANGLE_LIMITS``), a weak pull to
@@ -29,7 +30,7 @@ import torch
 from tqdm import tqdm
 
 from gma.video.camera import CAMERA_FROM_WORLD
-from gma.video.landmarks import BONE_PAIR_WEIGHTS, POSE_POINTS
+from gma.video.landmarks import POSE_POINTS
 from gma.video.rig import AnnyRig
 from gma.video.silhouette import SilhouetteRenderer, crop_box
 from gma.video.targets import FitTargets
@@ -48,7 +49,7 @@ class FitConfig:
     iters_shape: int = 150  # stage 3: all bones, phenotype, silhouette
     lr: float = 0.03  # Adam step size (radians / metres)
     w_2d: float = 1.0  # 2D reprojection
-    w_3d: float = 0.3  # 3D bone directions (per pair × gma.video.landmarks.BONE_PAIR_WEIGHTS)
+    w_3d: float = 0.3  # 3D directions (per pair × gma.video.landmarks.BONE_PAIR_WEIGHTS, FACE_PAIR_WEIGHTS)
     w_sil: float = 1.0  # mask silhouette (stage 3)
     w_smooth: float = 1.0  # temporal smoothness of model points (per m²)
     w_limit: float = 1.0  # joint limits (per rad²)
@@ -210,7 +211,6 @@ class _BodyFit:
         self.transl = torch.as_tensor(tr0, dtype=torch.float32).clone().requires_grad_(True)
         self.limits = rig.limits[: n_bones - 1]
         self.torso = torch.tensor([rig.index(n) for n in _TORSO])
-        self.pair_w = torch.tensor(BONE_PAIR_WEIGHTS)
         self.sil = None
         if masks is not None and cfg.iters_shape > 0 and cfg.w_sil > 0:
             self.sil = SilhouetteRenderer(rig.body.faces, size=cfg.sil_size, seed=cfg.seed)
@@ -262,7 +262,7 @@ class _BodyFit:
         d = cam[:, tg.pair_idx[:, 1]] - cam[:, tg.pair_idx[:, 0]]
         cos = (d / d.norm(dim=-1, keepdim=True).clamp_min(1e-6) * tg.dirs3d).sum(-1)
         ang = self.rotvecs[:, 1:].norm(dim=-1)
-        return {"3d": cfg.w_3d * (tg.conf3d * self.pair_w * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6),
+        return {"3d": cfg.w_3d * (tg.conf3d * tg.pair_w * (1 - cos)).sum() / tg.conf3d.sum().clamp_min(1e-6),
                 "limit": cfg.w_limit * torch.relu(ang - self.limits).pow(2).sum(-1).mean(),
                 "prior": cfg.w_prior * ang.pow(2).sum(-1).mean()}
 

@@ -33,6 +33,12 @@ not used. MediaPipe hand (21 landmarks per hand): 0 wrist → ``head:wrist``; th
 ``head:finger1-1``, ``head:finger1-2``, ``head:finger1-3``, ``tip:finger1-3``; index 5–8, middle 9–12,
 ring 13–16, pinky 17–20 → ``head:fingerN-1``, ``head:fingerN-2``, ``head:fingerN-3``,
 ``tip:fingerN-3`` with N = 2, 3, 4, 5. Anny's "left" (``.L``, +X) is the person's left, as MediaPipe's.
+
+MediaPipe face mesh: the centres of the eyes (each the mean of its two corners) and the nose tip
+(``gma.video.detect.FACE_MESH_POINTS``) → ``coco:left_eye``, ``coco:right_eye``, ``coco:nose``. Only the
+3D directions between them are used (``FACE_PAIRS``): the face mesh's depth is relative and its scale
+loose, but the line between the eyes tilts with the head's turn and roll, and the eyes-to-nose lines
+with its nod.
 """
 
 from __future__ import annotations
@@ -42,6 +48,9 @@ import numpy as np
 __all__ = [
     "BONE_PAIRS",
     "BONE_PAIR_WEIGHTS",
+    "FACE_PAIRS",
+    "FACE_PAIR_WEIGHTS",
+    "FACE_POINTS",
     "HAND_POINTS",
     "POSE_FLIP",
     "POSE_POINTS",
@@ -92,6 +101,14 @@ BONE_PAIRS = [
 # turn, legs, feet and torso lines at full weight left the feet 33-45° off, the lower legs 24-32° and
 # the root 8°; at a tenth, 12-13°, 9-10° and 6.5° (benchmarks/video_to_avatar.py, docs/fitting.md).
 BONE_PAIR_WEIGHTS = [1.0] * 4 + [0.1] * 10
+
+# The face mesh's points (in gma.video.detect.FACE_MESH_POINTS' order) and the Anny points they are.
+FACE_POINTS = ("coco:left_eye", "coco:right_eye", "coco:nose")
+# Face points whose 3D direction is compared (indices into FACE_POINTS, from → to): the eye line, and
+# each eye to the nose tip. The eye line counts most: both ends are large, well-found features; the
+# nose's depth is where the face mesh's guess of depth matters most.
+FACE_PAIRS = [(1, 0), (1, 2), (0, 2)]
+FACE_PAIR_WEIGHTS = [1.0, 0.5, 0.5]
 
 
 def hand_points(side: str) -> list[str]:

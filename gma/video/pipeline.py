@@ -104,14 +104,15 @@ def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, in
 
 
 # Bumped when the body fit changes in a way its settings do not show (2: per-pair weights of the 3D
-# directions; 3: limb swaps resolved and landmarks smoothed before the fit), so that OUT.work/ never hands
+# directions; 3: limb swaps resolved and landmarks smoothed before the fit; 4: the face mesh's
+# directions), so that OUT.work/ never hands
 # back a fit the current code would not make.
-FIT_CACHE_VERSION = 3
+FIT_CACHE_VERSION = 4
 
 
 def _fit_key(det, K: np.ndarray, cfg: FitConfig) -> str:
     h = hashlib.sha1(f"fit v{FIT_CACHE_VERSION}".encode())
-    for a in (det.pose2d, det.pose3d, det.hands2d, det.found, det.face, K):
+    for a in (det.pose2d, det.pose3d, det.hands2d, det.found, det.face, det.face3d, K):
         h.update(np.ascontiguousarray(a).tobytes())
     h.update(json.dumps(dataclasses.asdict(cfg), sort_keys=True).encode())
     return h.hexdigest()[:16]
@@ -273,7 +274,9 @@ def fit_detections(det, masks, K, cfg: VideoImportConfig, work: Path, anny, prog
     if anny is None:
         anny = load_body("anny")
     rig = AnnyRig(anny, fit_hands=cfg.fit.fit_hands)
-    tg = build_targets(rig.point_names, p2, p3, h2, det.found, use_hands=cfg.fit.fit_hands)
+    # A frame whose whole body was swapped shows the person's back: its face mesh (if any) is not trusted.
+    face3d = np.where(swaps[:, None, None], np.nan, det.face3d)
+    tg = build_targets(rig.point_names, p2, p3, h2, det.found, use_hands=cfg.fit.fit_hands, face3d=face3d)
     timings["prepare"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if cache.is_file():
