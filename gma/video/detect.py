@@ -10,10 +10,10 @@ frame on its own). The causal filter trails a fast-turning person (on a 16-frame
 shoulders lagged 10-20° of turn in most frames); on real footage turning at a walking pace the two
 score alike (docs/fitting.md), so tracking stays the default. Per-frame detections jitter more; the
 import can smooth them from both sides in time (``gma.video.smooth``, ``--smooth-frames``). The face
-mesh is a "face visible" cue for the left/right swap logic (``gma.video.swaps``), and three of its
-points in 3D (the eyes' centres and the nose tip) give the head's orientation to the body fit: the
-depth between the eyes says how far the head is turned, which the pose landmarks' 2D eyes and ears
-leave loose in three-quarter views. Fitting Anny's facial actions to it is future work.
+mesh is a "face visible" cue for the left/right swap logic (``gma.video.swaps``), and the centres
+of its eyes in 3D give the head's orientation to the body fit: the depth between the eyes says how far
+the head is turned, which the pose landmarks' 2D eyes and ears leave loose in three-quarter views.
+Fitting Anny's facial actions to it is future work.
 
 Results are cached one ``.npz`` per frame (no pickle) under the run's work directory, keyed by the
 frame's pixels, so a second run (after a crash, or with other fit settings) skips detection.
@@ -36,9 +36,9 @@ __all__ = ["Detections", "MissingExtraError", "detect_frames", "require_mediapip
 
 NUM_POSE = 33
 NUM_HAND = 21
-# Face mesh landmarks averaged into the face points: the person's left eye (outer, inner corner), right
-# eye, nose tip. The order is FACE_POINTS' (gma.video.landmarks).
-FACE_MESH_POINTS = ((263, 362), (33, 133), (1,))
+# Face mesh landmarks averaged into the face points: the person's left eye (outer, inner corner), then
+# the right eye. The order is FACE_POINTS' (gma.video.landmarks).
+FACE_MESH_POINTS = ((263, 362), (33, 133))
 # Cache version of each mode's results (the per-frame mode came later, and a cache of one mode is never
 # read back as the other's).
 # 3, 4: the face points were added.
@@ -74,7 +74,7 @@ class Detections:
     hands2d: [T, 2, 21, 3] left, right hand landmarks (x, y px, 1 = present / 0 = absent); "left" is the
              person's left, as for the pose landmarks
     face:    [T] bool, a face mesh was found (a frontal-view cue)
-    face3d:  [T, 3, 3] the person's left eye centre, right eye centre and nose tip from the face mesh, in
+    face3d:  [T, 2, 3] the person's left and right eye centres from the face mesh, in
              pixels along the camera's axes (x right, y down, z away; MediaPipe's depth is in the units of
              x), NaN where no face was found: only directions between them are used
     masks:   [T, H, W] float32 person probability in [0, 1]
@@ -111,7 +111,7 @@ def _landmarks(lms, n: int, w: int, h: int, world: bool = False) -> np.ndarray:
 
 
 def _face_points(lms, w: int, h: int) -> np.ndarray:
-    """[3, 3] FACE_MESH_POINTS of a face mesh, in pixels along the camera's axes; NaN without one."""
+    """[2, 3] FACE_MESH_POINTS of a face mesh, in pixels along the camera's axes; NaN without one."""
     out = np.full((len(FACE_MESH_POINTS), 3), np.nan, np.float32)
     if lms is None:
         return out

@@ -7,8 +7,8 @@ Energy (summed over frames; each term normalised so the weights are comparable):
   the person's size in pixels, with a Charbonnier (smooth L1) penalty so a few wrong landmarks do not
   dominate;
 - 3D bone directions against MediaPipe's world landmarks (1 − cos), which fixes what one view cannot:
-  whether a forearm points towards or away from the camera; and the same for the face's eye line and
-  eyes-to-nose lines against the face mesh where a face was found (the head's turn, roll and nod);
+  whether a forearm points towards or away from the camera; and the same for the line between the
+  eyes against the face mesh's where a face was found (the head's turn and roll);
 - mask silhouette (``gma.video.silhouette``) on a few random frames per step, in the last stage;
 - temporal smoothness of the model points (metres²) and root translation;
 - soft joint limits (per-bone rotation angle beyond ``gma.video.rig.ANGLE_LIMITS``), a weak pull to
