@@ -57,8 +57,10 @@ def _fit_height(image: np.ndarray, height: int) -> np.ndarray:
     return image[idx_y][:, idx_x]
 
 
-def _renders(avatar_path: Path, seq, split: str, resolution: int, refine_steps: int, body, ctx):
-    """The frames of ``split`` ([T, H, W, 3] targets, renders, posed body vertices) for one avatar."""
+def _renders(avatar_path: Path, seq, split: str, picks: list[int] | None, resolution: int, refine_steps: int,
+             body, ctx):
+    """The frames ``picks`` (sequence frame numbers; None: three, spread) of ``split``: (frames, [T, H, W, 3]
+    targets, renders, posed body vertices) for one avatar."""
     from gma.avatar import Avatar
     from gma.body.skinning import linear_blend_skinning
     from gma.train.data import load_frames
@@ -67,11 +69,17 @@ def _renders(avatar_path: Path, seq, split: str, resolution: int, refine_steps: 
 
     avatar = Avatar.load(avatar_path)
     frames = load_frames(seq, body, split, resolution, identity=avatar.shape)
+    picks = picks or [frames.indices[i] for i in np.linspace(0, len(frames) - 1, 3).round().astype(int)]
+    missing = sorted(set(picks) - set(frames.indices))
+    if missing:
+        raise ValueError(f"--frames {' '.join(map(str, missing))}: not in split {split!r}")
+    keep = [frames.indices.index(f) for f in picks]
+    frames = frames.subset(keep)
     with torch.no_grad():
         decoded = avatar.decode()
     bones = frames.bones
     if refine_steps > 0:
-        small = load_frames(seq, body, split, min(192, resolution), identity=avatar.shape)
+        small = load_frames(seq, body, split, min(192, resolution), identity=avatar.shape).subset(keep)
         corr = refine_frozen(decoded, body, small, refine_steps, PoseRefineConfig(), 1.0, ctx)
         with torch.no_grad():
             bones = body.bone_transforms({"pose": corr.all_poses(), "shape": frames.shape})
@@ -139,17 +147,17 @@ def main(argv=None) -> int:
 
     seq, ctx = read_sequence(args.sequence), get_context()
     body = load_body(seq.body.model)
-    frames, targets, before, posed = _renders(Path(args.before), seq, args.split, args.resolution,
-                                              args.refine_steps, body, ctx)
-    _, _, after, _ = _renders(Path(args.after), seq, args.split, args.resolution, args.refine_steps, body, ctx)
-    picks = args.frames or [frames.indices[i] for i in np.linspace(0, len(frames) - 1, 3).round().astype(int)]
-    missing = sorted(set(picks) - set(frames.indices))
-    if missing:
-        ap.exit(2, f"--frames {' '.join(map(str, missing))}: not in split {args.split!r}\n")
+    try:
+        frames, targets, before, posed = _renders(Path(args.before), seq, args.split, args.frames,
+                                                  args.resolution, args.refine_steps, body, ctx)
+    except ValueError as exc:
+        ap.exit(2, f"{exc}\n")
+    _, _, after, _ = _renders(Path(args.after), seq, args.split, frames.indices, args.resolution,
+                              args.refine_steps, body, ctx)
     mapper = RegionMapper(ctx, body)
     rows = []
-    for f in picks:
-        t = frames.indices.index(f)
+    picks = frames.indices
+    for t in range(len(frames)):
         regions = mapper.maps(posed[t], frames.w2c[t], frames.K[t], frames.masks[t])
         rows += [_row(targets[t], before[t], after[t], regions, ZOOM_PX), np.ones((6, 1, 3), np.float32)]
     width = max(r.shape[1] for r in rows)

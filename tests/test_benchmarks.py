@@ -60,7 +60,7 @@ SMOKE: dict[str, list[str] | str] = {
     "video_hdr.py": ["--work", "{tmp}/work", "--figure", "{tmp}/hdr.png"],
     "video_to_avatar.py": "needs the video extra and minutes of fitting: python benchmarks/video_to_avatar.py",
     "unseen_real.py": "needs the iPER clip and a quick fit: python benchmarks/unseen_real.py",
-    "closeups.py": "needs two fitted avatars of one sequence: python benchmarks/closeups.py SEQ A B --out X.png",
+    "closeups.py": "needs two avatars of one sequence; test_closeups_picture_of_two_avatars runs it small",
     "web_export.py": "needs Debian's chromium and minutes of software WebGL; tests/test_web_export.py covers "
                      "the page in a browser: python benchmarks/web_export.py",
     "report.py": "runs the other scripts; test_report_names_machine_commit_and_command runs it small",
@@ -281,3 +281,30 @@ def test_smoke_runner_keeps_each_scripts_outcome(tmp_path):
     assert res["raises.py"]["returncode"] == 1 and "ValueError: broken script" in res["raises.py"]["stderr"]
     # ... and what a script switched off process-wide in torch is on again for the next
     assert res["last.py"]["returncode"] == 0 and "still ran, gradients True" in res["last.py"]["stdout"]
+
+
+@pytest.mark.gpu
+def test_closeups_picture_of_two_avatars(tiny_sequence, anny_body, tmp_path, monkeypatch, capsys):
+    """``closeups.py`` (skipped in the smoke runs: it needs two avatars of one sequence) on two unfitted
+    avatars of the tiny sequence: one row per picked frame, test-time fitting of those frames only, and a
+    frame outside the split refused in one line with exit code 2."""
+    from gma.avatar import Avatar, AvatarConfig
+    from gma.core.images import read_image
+
+    monkeypatch.syspath_prepend(str(BENCH))
+    import closeups
+
+    seq = tiny_sequence(0)
+    for name, seed in (("a", 0), ("b", 1)):
+        Avatar.create(AvatarConfig(feature_dim=4, fine_per_face=1), anny_body, seed=seed).save(tmp_path / f"{name}.gma")
+    frames = seq.split("test_pose")
+    out = tmp_path / "closeups.png"
+    args = [str(seq.root), str(tmp_path / "a.gma"), str(tmp_path / "b.gma"), "--split", "test_pose",
+            "--resolution", "32", "--refine-steps", "1"]
+    assert closeups.main([*args, "--out", str(out), "--frames", str(frames[-1])]) == 0
+    picture = read_image(out)
+    assert picture.shape[0] == closeups.ZOOM_PX and picture.shape[1] > 6 * closeups.ZOOM_PX  # one row
+    with pytest.raises(SystemExit) as exit_:
+        closeups.main([*args, "--out", str(tmp_path / "x.png"), "--frames", "999"])
+    assert exit_.value.code == 2 and "999: not in split 'test_pose'" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not (tmp_path / "x.png").exists()

@@ -40,6 +40,12 @@ class FrameSet:
         m = self.masks[t]
         return self.images[t] * m + background * (1 - m)
 
+    def subset(self, keep: list[int]) -> FrameSet:
+        """The frames at positions ``keep`` (indices into this set, not frame numbers), in that order."""
+        pick = torch.as_tensor(keep, dtype=torch.long)
+        return FrameSet(self.images[pick], self.masks[pick], self.K[pick], self.w2c[pick], self.rest[pick],
+                        self.bones[pick], [self.indices[k] for k in keep], self.shape, self.poses[pick])
+
     def resized(self, resolution: int) -> FrameSet:
         """The same frames with the longest side at most ``resolution`` (area-downsampled, intrinsics
         scaled; never upscaled): a fit's stages may render at different sizes."""
