@@ -302,7 +302,7 @@ def test_face_mesh_directions_turn_the_head(synth_clip, rig, anny_body):
         tg.conf[:, body] = 1.0
         tg.scale[:] = 150.0
         res = fit_body(rig, tg, torso, seq.cameras.frame(0)[0], None,
-                       FitConfig(iters_root=30, iters_pose=150, iters_shape=0), progress=False)
+                       FitConfig(iters_root=20, iters_pose=100, iters_shape=0), progress=False)
         from gma.video.camera import CAMERA_FROM_WORLD
 
         got = _eye_line(rig, torch.as_tensor(res.pose), rest, np.pad(CAMERA_FROM_WORLD, ((0, 1), (0, 1))))
