@@ -232,6 +232,6 @@ def _region_rows(regions: dict) -> list[str]:
     inside the person's mask there (gma.train.regions)."""
     lines = ["region      psnr       ssim    opacity   coverage  frames"]
     for name, r in regions.items():
-        cells = ["   absent" if r.get(k) is None else _fmt(k, r[k]) for k in ("psnr", "ssim", "opacity", "coverage")]
+        cells = ["   absent" if r[k] is None else _fmt(k, r[k]) for k in ("psnr", "ssim", "opacity", "coverage")]
         lines.append(f"{name:>6}  " + "  ".join(cells) + f"  {r['frames']:>6}")
     return lines

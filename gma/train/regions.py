@@ -114,11 +114,11 @@ def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tens
     for name, where in regions.items():
         m = torch.from_numpy(where)
         inside = m & person
-        shown = bool(m.any())
+        shown, solid = bool(m.any()), bool(inside.any())
         out[name] = {"psnr": _masked_psnr(render, target, m) if shown else None,
                      "ssim": float(similarity[m].mean()) if shown else None,
-                     "opacity": float(alpha[..., 0][inside].mean()) if bool(inside.any()) else None,
-                     "coverage": float(covered[inside].sum() / soft[inside].sum()) if bool(inside.any()) else None}
+                     "opacity": float(alpha[..., 0][inside].mean()) if solid else None,
+                     "coverage": float(covered[inside].sum() / soft[inside].sum()) if solid else None}
     return out
 
 

@@ -104,9 +104,8 @@ def _masks_from_dir(mask_dir: Path, idx: list[int], n: int, shape: tuple[int, in
 
 
 # Bumped when the body fit changes in a way its settings do not show (2: per-pair weights of the 3D
-# directions; 3: limb swaps resolved and landmarks smoothed before the fit; 4: the face mesh's
-# directions), so that OUT.work/ never hands
-# back a fit the current code would not make.
+# directions; 3: limb swaps resolved and landmarks smoothed before the fit; 4: the face mesh's eye
+# line), so that OUT.work/ never hands back a fit the current code would not make.
 FIT_CACHE_VERSION = 4
 
 
