@@ -266,9 +266,15 @@ def _eye_line(rig, pose: torch.Tensor, rest, w2c: np.ndarray) -> np.ndarray:
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """[T] degrees between unit vectors [T, 3]."""
+    return np.degrees(np.arccos(np.clip((a * b).sum(-1), -1, 1)))
+
+
 def test_face_mesh_directions_turn_the_head(synth_clip, rig, anny_body):
     """The body's 2D landmarks say nothing of the head (its points are left out); the face mesh's 3D eye
-    and nose lines, taken from the same frames with the head turned 0.5 rad, must turn the fitted head."""
+    line, taken from the same frames with the head turned 0.5 rad, must turn the fitted head."""
+    from gma.video.camera import CAMERA_FROM_WORLD
     from gma.video.fit import FitConfig, fit_body
     from gma.video.landmarks import FACE_POINTS
     from gma.video.targets import build_targets
@@ -282,8 +288,8 @@ def test_face_mesh_directions_turn_the_head(synth_clip, rig, anny_body):
     turn = roma.rotvec_to_rotmat(torch.tensor([0.0, 0.0, 0.5]))
     turned[:, head, :3, :3] = turned[:, head, :3, :3] @ turn
     _, w2c = seq.cameras.frame(0)
-    moved = np.degrees(np.arccos(np.clip((_eye_line(rig, pose, rest, w2c)
-                                          * _eye_line(rig, turned, rest, w2c)).sum(-1), -1, 1)))
+    target_line = _eye_line(rig, turned, rest, w2c)
+    moved = _angle_deg(_eye_line(rig, pose, rest, w2c), target_line)
     assert (moved > 10).all(), moved  # the turn shows in the eye line
     with torch.no_grad():
         face_pts = rig.points(rig.transforms(turned, rest), rest)[:, [rig.index(n) for n in FACE_POINTS]]
@@ -293,20 +299,19 @@ def test_face_mesh_directions_turn_the_head(synth_clip, rig, anny_body):
     for mp_i, name in {11: "coco:left_shoulder", 12: "coco:right_shoulder", 23: "coco:left_hip",
                        24: "coco:right_hip"}.items():
         torso[:, mp_i] = body_pts[:, rig.index(name)] @ w2c[:3, :3].T
+    gt_uv = torch.as_tensor(_gt_uv(rig, seq)[:T])
 
     def fitted_eye_error(face):
         tg = build_targets(rig.point_names, np.zeros((T, 33, 3)), np.full((T, 33, 3), np.nan),
                            np.zeros((T, 2, 21, 3)), np.ones(T, bool), face3d=face)
         body = [rig.index(n) for n in BODY_JOINTS if n != "coco:nose"]
-        tg.uv[:] = torch.as_tensor(_gt_uv(rig, seq)[:T])
+        tg.uv[:] = gt_uv
         tg.conf[:, body] = 1.0
         tg.scale[:] = 150.0
         res = fit_body(rig, tg, torso, seq.cameras.frame(0)[0], None,
                        FitConfig(iters_root=20, iters_pose=100, iters_shape=0), progress=False)
-        from gma.video.camera import CAMERA_FROM_WORLD
-
         got = _eye_line(rig, torch.as_tensor(res.pose), rest, np.pad(CAMERA_FROM_WORLD, ((0, 1), (0, 1))))
-        return np.degrees(np.arccos(np.clip((got * _eye_line(rig, turned, rest, w2c)).sum(-1), -1, 1)))
+        return _angle_deg(got, target_line)
 
     with_face, without = fitted_eye_error(face3d), fitted_eye_error(None)
     assert with_face.max() < 5 and without.mean() > 10, (with_face, without)
