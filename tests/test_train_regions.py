@@ -42,6 +42,12 @@ def test_region_scores_follow_their_own_pixels():
     assert scores["hands"]["opacity"] == pytest.approx(0.5)
     assert scores["hands"]["coverage"] == pytest.approx(0.5) and scores["face"]["coverage"] == 1.0
     assert scores["face"]["ssim"] > scores["hands"]["ssim"]
+    assert scores["hands"]["error"] == pytest.approx(1.0) and scores["face"]["error"] == 0.0
+    # A share of the frame's error, not of the region's: a region larger than where the error lies gets all
+    # of it, a region beside it none, and a frame without error gives every region 0 (not 0 / 0).
+    everywhere = np.ones((24, 32), bool)
+    assert region_metrics(render, target, alpha, mask, {"rest": everywhere})["rest"]["error"] == pytest.approx(1.0)
+    assert region_metrics(target, target, alpha, mask, {"rest": everywhere})["rest"]["error"] == 0.0
 
 
 def test_coverage_tells_an_anti_aliased_outline_from_a_see_through_one():
@@ -67,10 +73,11 @@ def test_a_region_the_frame_does_not_show_is_absent_not_nan():
     outside_mask[0, 0] = True
     mask = torch.zeros(24, 32, 1)  # the person covers nothing: no opacity to average
     scores = region_metrics(render, target, torch.ones(24, 32, 1), mask, {"hands": nowhere, "face": outside_mask})
-    assert scores["hands"] == {"psnr": None, "ssim": None, "opacity": None, "coverage": None}
+    assert scores["hands"] == {"psnr": None, "ssim": None, "error": None, "opacity": None, "coverage": None}
     assert scores["face"]["psnr"] == 99.0 and scores["face"]["opacity"] is None
     means = mean_by_region([scores, scores])
-    assert means["hands"] == {"psnr": None, "ssim": None, "opacity": None, "coverage": None, "frames": 0}
+    assert means["hands"] == {"psnr": None, "ssim": None, "error": None, "opacity": None, "coverage": None,
+                              "frames": 0}
     assert means["face"]["frames"] == 2
     assert not any(isinstance(v, float) and math.isnan(v) for r in means.values() for v in r.values())
 

@@ -228,10 +228,11 @@ def _rows(result: dict) -> list[str]:
 
 
 def _region_rows(regions: dict) -> list[str]:
-    """Per region: PSNR and SSIM over its pixels, mean rendered opacity and coverage of the soft mask
-    inside the person's mask there (gma.train.regions)."""
-    lines = ["region      psnr       ssim    opacity   coverage  frames"]
+    """Per region: PSNR and SSIM over its pixels, its share of the squared error, mean rendered opacity and
+    coverage of the soft mask inside the person's mask there (gma.train.regions)."""
+    lines = ["region      psnr       ssim      error    opacity   coverage  frames"]
     for name, r in regions.items():
-        cells = ["   absent" if r[k] is None else _fmt(k, r[k]) for k in ("psnr", "ssim", "opacity", "coverage")]
+        cells = ["   absent" if r[k] is None else _fmt(k, r[k])
+                 for k in ("psnr", "ssim", "error", "opacity", "coverage")]
         lines.append(f"{name:>6}  " + "  ".join(cells) + f"  {r['frames']:>6}")
     return lines

@@ -11,8 +11,10 @@ One more region crosses the others: ``edge``, the pixels within ``EDGE_PX`` of t
 person's mask, on either side. A misplaced limb or a loose outline shows there first, so its score
 separates "the outline is wrong" from "the texture inside is wrong".
 
-Per region, :func:`region_metrics` gives PSNR and SSIM over the region's pixels, and two measures of
-how solid the avatar is inside the person's mask (``mask`` > 0.5) there:
+Per region, :func:`region_metrics` gives PSNR and SSIM over the region's pixels; ``error``, the region's
+share of the frame's squared colour error (a region scoring low PSNR over a few pixels may still cost the
+image little: this says where a better avatar would gain); and two measures of how solid the avatar is
+inside the person's mask (``mask`` > 0.5) there:
 
 - ``opacity``: the mean rendered alpha (1 where the avatar is solid, lower where the background shows
   through);
@@ -102,11 +104,14 @@ def _masked_psnr(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor) -> float:
 
 def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tensor, mask: torch.Tensor,
                    regions: dict[str, np.ndarray]) -> dict[str, dict[str, float | None]]:
-    """{region: {"psnr", "ssim", "opacity", "coverage"}} of [H, W, 3] ``render`` against ``target`` over
-    each region's pixels; ``opacity`` is the mean rendered ``alpha`` [H, W, 1] inside ``mask`` [H, W, 1]
-    > 0.5 there, ``coverage`` the share of the soft mask there that ``alpha`` covers (module docstring).
-    None for what the frame does not show."""
+    """{region: {"psnr", "ssim", "error", "opacity", "coverage"}} of [H, W, 3] ``render`` against ``target``
+    over each region's pixels; ``error`` is the region's share of the frame's squared error (0 for a frame
+    without error), ``opacity`` the mean rendered ``alpha`` [H, W, 1] inside ``mask`` [H, W, 1] > 0.5
+    there, ``coverage`` the share of the soft mask there that ``alpha`` covers (module docstring). None for
+    what the frame does not show."""
     similarity = ssim_map(render, target)
+    squared = ((render - target) ** 2).sum(-1)
+    total = float(squared.sum())
     soft = mask[..., 0].clamp(0, 1)
     person = soft > 0.5
     covered = torch.minimum(alpha[..., 0], soft)
@@ -117,6 +122,7 @@ def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tens
         shown, solid = bool(m.any()), bool(inside.any())
         out[name] = {"psnr": _masked_psnr(render, target, m) if shown else None,
                      "ssim": float(similarity[m].mean()) if shown else None,
+                     "error": (float(squared[m].sum()) / total if total > 0 else 0.0) if shown else None,
                      "opacity": float(alpha[..., 0][inside].mean()) if solid else None,
                      "coverage": float(covered[inside].sum() / soft[inside].sum()) if solid else None}
     return out
