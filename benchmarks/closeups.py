@@ -64,6 +64,7 @@ def _renders(avatar_path: Path, seq, split: str, picks: list[int] | None, resolu
     from gma.avatar import Avatar
     from gma.body.skinning import linear_blend_skinning
     from gma.train.data import load_frames
+    from gma.train.evaluate import fitted_resolution
     from gma.train.pose_refine import PoseRefineConfig, refine_frozen
     from gma.train.render_step import render_frame
 
@@ -79,7 +80,8 @@ def _renders(avatar_path: Path, seq, split: str, picks: list[int] | None, resolu
         decoded = avatar.decode()
     bones = frames.bones
     if refine_steps > 0:
-        small = load_frames(seq, body, split, min(192, resolution), identity=avatar.shape).subset(keep)
+        small = load_frames(seq, body, split, min(fitted_resolution(avatar), resolution),
+                            identity=avatar.shape).subset(keep)
         corr = refine_frozen(decoded, body, small, refine_steps, PoseRefineConfig(), 1.0, ctx)
         with torch.no_grad():
             bones = body.bone_transforms({"pose": corr.all_poses(), "shape": frames.shape})

@@ -542,6 +542,9 @@ CASES = [
     Case("eval --refine-colour maybe",
          lambda t, s, a: ["eval", str(a), str(s), "--refine-poses", "1", "--refine-colour", "maybe"], "--refine-colour",
          argparse=True),
+    Case("eval --refine-resolution 4",
+         lambda t, s, a: ["eval", str(a), str(s), "--refine-poses", "1", "--refine-resolution", "4"],
+         "--refine-resolution"),
 ]
 
 

@@ -18,6 +18,7 @@ import pytest
 import roma
 import torch
 
+from gma.avatar import Avatar
 from gma.core.errors import InputError
 from gma.train.metrics import box_metrics, mask_iou, person_box, psnr, ssim
 from gma.train.pose_refine import PoseRefineConfig, apply_corrections, blurred, coarse_sigma, refine_wanted
@@ -311,6 +312,30 @@ def frozen_frame(seq, anny_body, gpu, tmp_path_factory):
     return decoded, frames, score
 
 
+def test_pose_fitting_draws_the_avatar_as_it_is_shown(seq, anny_body, monkeypatch):
+    """Test-time fitting draws every surfel, as frames are scored and shown: faces turned away from the
+    camera still show past the silhouette, and poses fitted without them misplace the outline. Culling
+    them (half the work) is the caller's choice: the fit's alignment pass draws as the fit's steps do."""
+    from gma.train import pose_refine
+    from gma.train.data import load_frames
+
+    class Drawn(Exception):
+        pass
+
+    drawn = []
+
+    def draw(*args, cull, **kwargs):
+        drawn.append(cull)
+        raise Drawn  # the choice is all this test needs: skip the render and the step
+
+    monkeypatch.setattr(pose_refine, "render_frame", draw)
+    frames = load_frames(seq, anny_body, "train", 32)
+    for kwargs in ({}, {"cull": True}, {"cull": False}):
+        with pytest.raises(Drawn):
+            pose_refine.refine_frozen(None, anny_body, frames, 1, PoseRefineConfig(), **kwargs)
+    assert drawn == [False, True, False]
+
+
 @pytest.mark.slow
 def test_eval_refine_poses_improves_perturbed_frame(frozen_frame, anny_body, gpu):
     from gma.train.pose_refine import BONE_SETS, PoseCorrections, fit_corrections, refine_frozen
@@ -372,7 +397,7 @@ def test_eval_refine_poses_corrects_twist_bones(frozen_frame, anny_body, gpu):
 def test_eval_cli_reports_refined_scores(seq, anny_body, gpu, tmp_path):
     from gma.cli import main
 
-    _fit(seq, tmp_path / "e.gma", anny_body, gpu, pose={"refine": "off"}, stage1_steps=3)
+    _fit(seq, tmp_path / "e.gma", anny_body, gpu, pose={"refine": "off"}, stage1_steps=3, resolution=32)
     rc = main(["eval", str(tmp_path / "e.gma"), str(seq.root), "--split", "test_view", "--resolution", "32",
                "--refine-poses", "2", "--refine-resolution", "32", "--out", str(tmp_path / "ev")])
     assert rc in (0, None)
@@ -383,6 +408,13 @@ def test_eval_cli_reports_refined_scores(seq, anny_body, gpu, tmp_path):
     assert "after test-time pose fitting" in (tmp_path / "ev" / "metrics_test_view.txt").read_text()
     assert list((tmp_path / "ev").glob("test_view_refined_*.png"))
     assert main(["eval", str(tmp_path / "e.gma"), str(seq.root), "--refine-poses", "-1"]) == 2
+    # Without --refine-resolution, test-time fitting renders at the size the avatar was fitted at (32 px),
+    # not at the evaluation's (the sequence's 64 px).
+    assert Avatar.load(tmp_path / "e.gma").info["resolution"] == 32
+    main(["eval", str(tmp_path / "e.gma"), str(seq.root), "--split", "test_view", "--resolution", "64",
+          "--refine-poses", "1", "--images", "0", "--out", str(tmp_path / "ev64")])
+    res = json.loads((tmp_path / "ev64" / "metrics_test_view.json").read_text())
+    assert res["resolution"] == [64, 64] and res["refined"]["resolution"] == [32, 32]
 
 
 @pytest.mark.slow

@@ -29,8 +29,9 @@ def register(subparsers) -> None:
     p.add_argument("--refine-poses", type=int, default=0, metavar="N",
                    help="test-time pose fitting: N steps per frame with the avatar frozen (0: off; the gain flattens "
                         "by about 500, docs/fitting.md; a minute or more a frame on a CPU)")
-    p.add_argument("--refine-resolution", type=int, default=192,
-                   help="longest image side the test-time pose fitting renders at")
+    p.add_argument("--refine-resolution", type=int, default=0,
+                   help="longest image side the test-time pose fitting renders at (0: the one the avatar was "
+                        "fitted at)")
     p.add_argument("--refine-bones", choices=BONE_SET_NAMES, default=PoseRefineConfig().bones,
                    help="bones the test-time pose fitting corrects: body (also the limbs' twist bones, shoulders, "
                         "hips) or video (the ones the video fit estimates), as --pose.bones of gma fit")
@@ -69,8 +70,10 @@ def run(args: argparse.Namespace) -> int:
                          f"{', '.join(have) or 'no splits'}); choose one with --split")
     if args.refine_poses < 0:
         raise InputError(f"--refine-poses: expected a number of steps >= 0, got {args.refine_poses}")
+    if args.refine_resolution != 0 and args.refine_resolution < 8:
+        raise InputError(f"--refine-resolution: expected 0 (the avatar's) or >= 8, got {args.refine_resolution}")
     results = evaluate_splits(avatar, seq, splits, out, args.resolution, args.background, images=args.images,
-                              refine_steps=args.refine_poses, refine_resolution=args.refine_resolution,
+                              refine_steps=args.refine_poses, refine_resolution=args.refine_resolution or None,
                               refine=PoseRefineConfig(bones=args.refine_bones),
                               refine_colour={"auto": None, "on": True, "off": False}[args.refine_colour])
     geometry = results["geometry"]

@@ -28,24 +28,28 @@ from gma.train.pose_refine import TEST_TIME_MSE, PoseRefineConfig, refine_frozen
 from gma.train.regions import RegionMapper, mean_by_region, region_metrics
 from gma.train.render_step import render_frame
 
-__all__ = ["EVAL_SPLITS", "evaluate", "evaluate_splits", "format_table", "geometry_metrics"]
+__all__ = ["EVAL_SPLITS", "evaluate", "evaluate_splits", "fitted_resolution", "format_table", "geometry_metrics"]
 
 # The held-out splits of a synthetic or imported sequence: novel poses and novel views.
 EVAL_SPLITS = ("test_pose", "test_view")
 WORST = 5  # frames in the "worst" mean
+# Test-time pose fitting's resolution for avatars that do not record the one they were fitted at (the
+# quick preset's).
+FALLBACK_REFINE_RESOLUTION = 192
 
 
 def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None, resolution: int = 512,
              background: float = 0.5, body=None, ctx=None, images: int = 4, use_lpips: bool = True,
-             refine_steps: int = 0, refine_resolution: int = 192, refine: PoseRefineConfig | None = None,
+             refine_steps: int = 0, refine_resolution: int | None = None, refine: PoseRefineConfig | None = None,
              refine_colour: bool | None = None, progress: bool = False) -> dict:
     """Metrics of ``avatar`` on ``split`` of ``seq`` at ``resolution`` (longest side). Writes
     ``metrics_<split>.json``, ``metrics_<split>.txt`` and up to ``images`` side-by-side PNGs into
     ``out_dir`` when given. Returns {"split", "frames": [{frame, psnr, ssim, psnr_bbox, ssim_bbox,
     mask_iou[, lpips]}], "mean": {...}}, plus "refined": {"steps", "resolution", "coarse_to_fine", "mse", "bones",
     "frames", "mean", "poses"} when ``refine_steps`` > 0: each frame's pose first optimised for that many steps at
-    ``refine_resolution`` against its image with the avatar frozen (``refine``: learning rates and prior;
-    coarse to fine, see :func:`gma.train.pose_refine.refine_frozen`), then scored again. With
+    ``refine_resolution`` (None: :func:`fitted_resolution`) against its image with the avatar frozen
+    (``refine``: learning rates and prior; coarse to fine, every surfel drawn as the scoring draws them, see
+    :func:`gma.train.pose_refine.refine_frozen`), then scored again. With
     ``refine_colour`` (None: when the avatar was fitted with per-frame colour transforms) each frame's colour
     transform (``gma.train.appearance.FrameColour``) is fitted with its pose, and "refined" has "colour".
 
@@ -64,7 +68,8 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
     result = {"split": split, "sequence": str(seq.root), "resolution": list(frames.images.shape[1:3]),
               "identity_delta": _identity_delta(avatar, seq, frames.indices[0]), "frames": rows, **_summaries(rows)}
     if refine_steps > 0:
-        small = load_frames(seq, body, split, min(refine_resolution, resolution), identity=avatar.shape)
+        small = load_frames(seq, body, split, min(refine_resolution or fitted_resolution(avatar), resolution),
+                            identity=avatar.shape)
         refine = refine or PoseRefineConfig()
         if refine_colour is None:
             refine_colour = "frame_colour" in avatar.info
@@ -86,6 +91,13 @@ def evaluate(avatar: Avatar, seq, split: str, out_dir: str | Path | None = None,
         atomic_write_json(out_dir / f"metrics_{split}.json", result)
         (out_dir / f"metrics_{split}.txt").write_text(format_table(result) + "\n")
     return result
+
+
+def fitted_resolution(avatar: Avatar) -> int:
+    """The longest image side ``avatar``'s texture was fitted at (``FALLBACK_REFINE_RESOLUTION`` for avatars
+    that do not record it): test-time pose fitting renders there. Coarser, a hand or a face is a few pixels
+    and its pose is left loose; finer, the avatar shows detail it never learnt (docs/fitting.md)."""
+    return int(avatar.info.get("resolution", FALLBACK_REFINE_RESOLUTION))
 
 
 def _identity_delta(avatar: Avatar, seq, frame: int) -> float:
@@ -138,7 +150,7 @@ def _score(decoded, body, frames, bones, background, ctx, lp, out_dir, name: str
 
 def evaluate_splits(avatar: Avatar, seq, splits=EVAL_SPLITS, out_dir: str | Path | None = None,
                     resolution: int = 512, background: float = 0.5, body=None, ctx=None, images: int = 4,
-                    report=print, refine_steps: int = 0, refine_resolution: int = 192,
+                    report=print, refine_steps: int = 0, refine_resolution: int | None = None,
                     refine: PoseRefineConfig | None = None, refine_colour: bool | None = None) -> dict:
     """The one evaluation loop of ``gma eval``, ``gma demo`` and the benchmarks: :func:`evaluate` on each
     of ``splits`` that ``seq`` has (``report`` gets each table; ``refine_*``: test-time pose fitting, see

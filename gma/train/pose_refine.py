@@ -198,27 +198,33 @@ def coarse_sigma(step: int, steps: int, size: int) -> float:
 
 
 def refine_frozen(decoded, body, frames, steps: int, cfg: PoseRefineConfig, background: float = 0.5,
-                  ctx=None, progress: bool = False, colour=None, colour_cfg=None) -> PoseCorrections:
+                  ctx=None, progress: bool = False, colour=None, colour_cfg=None, cull: bool = False
+                  ) -> PoseCorrections:
     """Test-time pose fitting (the PeopleSnapshot protocol of Anim-NeRF / InstantAvatar): each frame's
     corrections optimised for ``steps`` Adam steps against its image and mask, with the avatar frozen
     (``decoded`` is used as it is; decode it under ``torch.no_grad``). Frames are independent (no
     smoothness); the prior still pulls toward the input pose. The first steps compare blurred pictures
     (see ``COARSE_BLUR``). ``colour`` (optional, a ``gma.train.appearance.FrameColour`` of the frames, with
-    ``colour_cfg`` its learning rate and prior) is fitted with the poses. Returns the corrections of ``frames``."""
+    ``colour_cfg`` its learning rate and prior) is fitted with the poses. ``cull``: draw only the surfels of
+    faces not turned away from the camera, as :func:`fit_corrections` explains; off by default, as frames
+    are scored and shown with every surfel. Returns the corrections of ``frames``."""
     corr = PoseCorrections(body, frames.poses, frames.indices, BONE_SETS[cfg.bones])
     fit_corrections(corr, decoded, body, frames, steps, cfg, background, ctx, progress, mse=TEST_TIME_MSE,
-                    colour=colour, colour_cfg=colour_cfg)
+                    colour=colour, colour_cfg=colour_cfg, cull=cull)
     return corr
 
 
 def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cfg: PoseRefineConfig,
                     background: float = 0.5, ctx=None, progress: bool = False, desc: str = "refine poses",
-                    mse: float = 0.0, colour=None, colour_cfg=None) -> None:
+                    mse: float = 0.0, colour=None, colour_cfg=None, cull: bool = False) -> None:
     """Each frame's corrections in ``corr`` (from where they are) fitted to its image for ``steps`` steps
     with the avatar ``decoded`` frozen: what :func:`refine_frozen` does, in place. ``mse``: weight of the
     mean squared colour error beside L1 and SSIM (test-time fitting: ``TEST_TIME_MSE``; the fit's alignment
     pass leaves it at 0). ``colour`` (optional): the frames' colour transforms
-    (``gma.train.appearance.FrameColour``), fitted beside the poses under ``colour_cfg``'s rate and prior."""
+    (``gma.train.appearance.FrameColour``), fitted beside the poses under ``colour_cfg``'s rate and prior.
+    ``cull``: draw only the surfels on faces not turned away from the camera (half the work). The poses
+    are fitted to the picture drawn, so draw it as the result will be drawn: the surfels of faces turned
+    away still show past the silhouette, and poses fitted without them misplace the outline."""
     size = max(frames.images.shape[1:3])
     bar = tqdm(total=len(frames) * steps, desc=desc, unit="step", disable=not progress, leave=False)
     for t in range(len(frames)):
@@ -233,7 +239,7 @@ def fit_corrections(corr: PoseCorrections, decoded, body, frames, steps: int, cf
             for g, lr in zip(opt.param_groups, base, strict=True):  # settle: 10x smaller steps by the end
                 g["lr"] = lr * 0.1 ** (i / max(1, steps))
             bones = body.bone_transforms({"pose": corr.pose(t), "shape": frames.shape})
-            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=True, bones=bones)
+            out, _ = render_frame(decoded, body, frames, t, background, ctx, cull=cull, bones=bones)
             color = out.color if colour is None else colour.apply(t, out.color, out.alpha, background)
             want, alpha, mask = target, out.alpha, frames.masks[t]
             sigma = coarse_sigma(i, steps, size)

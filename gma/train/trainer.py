@@ -367,7 +367,7 @@ class Trainer:
             frames = sub.view(stage.resolution)[0]
             fit_corrections(sub.poses, decoded, self.body, frames, self.cfg.pose.align, self.cfg.pose,
                             self.cfg.background, self.ctx, self.progress, desc="align poses",
-                            colour=sub.colours, colour_cfg=self.cfg.colour)
+                            colour=sub.colours, colour_cfg=self.cfg.colour, cull=self.cfg.cull_backfaces)
         self.align_seconds += time.perf_counter() - t0
 
     def _preview(self, step: int) -> None:
@@ -555,6 +555,7 @@ class Trainer:
             mine = [h for h in self.history if h.get("subject", 0) == i]
             sub.avatar.info = {"fit_seconds": round(fit_seconds, 1), "steps": total, "sequence": str(sub.seq.root),
                                "preset": self.cfg.preset, "training": self.cfg.training,
+                               "resolution": max(sub.frames.images.shape[1:3]),
                                "final_train_psnr": mine[-1]["psnr"] if mine else None}
             if shared:
                 sub.avatar.info["decoders_shared_with"] = shared
