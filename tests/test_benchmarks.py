@@ -42,7 +42,7 @@ SMOKE: dict[str, list[str] | str] = {
     "viewer_fps.py": ["--size", "96x64", "--surfels", "2000", "--frames", "3", "--fine-per-face", "1"],
     "avatar_decode.py": ["--size", "64"],
     "fit_presets.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
-    "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out"],
+    "ablations.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--steps", "2", "2"],
     "shared_decoders.py": ["--seq", "{tmp}/seq", "--out", "{tmp}/out", "--train-seeds", "1", "2"],
     "interop.py": ["--size", "32", "--quick"],
     "edit.py": ["--repeats", "1"],
