@@ -158,7 +158,6 @@ def main(argv=None) -> int:
                               args.refine_steps, body, ctx)
     mapper = RegionMapper(ctx, body)
     rows = []
-    picks = frames.indices
     for t in range(len(frames)):
         regions = mapper.maps(posed[t], frames.w2c[t], frames.K[t], frames.masks[t])
         rows += [_row(targets[t], before[t], after[t], regions, ZOOM_PX), np.ones((6, 1, 3), np.float32)]
@@ -167,7 +166,7 @@ def main(argv=None) -> int:
                               for r in rows[:-1]], 0)
     save_png(Path(args.out), picture)
     print(f"wrote {args.out} (per frame: target | {Path(args.before).name} | {Path(args.after).name}, "
-          f"then the face and a hand enlarged in the same order; frames {picks})")
+          f"then the face and a hand enlarged in the same order; frames {frames.indices})")
     return 0
 
 

@@ -97,8 +97,9 @@ class RegionMapper:
         return {**{name: code == i for i, name in enumerate(BODY_REGIONS)}, "edge": edge_band(person)}
 
 
-def _masked_psnr(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor) -> float:
-    mse = float(((a - b) ** 2)[m].mean())
+def _psnr_of(squared: torch.Tensor, channels: int) -> float:
+    """PSNR of pixels whose squared colour errors, summed over ``channels``, are ``squared`` [N]."""
+    mse = float(squared.mean()) / channels
     return 99.0 if mse <= 1e-10 else 10 * math.log10(1.0 / mse)
 
 
@@ -110,7 +111,7 @@ def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tens
     there, ``coverage`` the share of the soft mask there that ``alpha`` covers (module docstring). None for
     what the frame does not show."""
     similarity = ssim_map(render, target)
-    squared = ((render - target) ** 2).sum(-1)
+    squared = ((render - target) ** 2).sum(-1)  # [H, W]: every region's PSNR and error share read it
     total = float(squared.sum())
     soft = mask[..., 0].clamp(0, 1)
     person = soft > 0.5
@@ -120,7 +121,7 @@ def region_metrics(render: torch.Tensor, target: torch.Tensor, alpha: torch.Tens
         m = torch.from_numpy(where)
         inside = m & person
         shown, solid = bool(m.any()), bool(inside.any())
-        out[name] = {"psnr": _masked_psnr(render, target, m) if shown else None,
+        out[name] = {"psnr": _psnr_of(squared[m], render.shape[-1]) if shown else None,
                      "ssim": float(similarity[m].mean()) if shown else None,
                      "error": (float(squared[m].sum()) / total if total > 0 else 0.0) if shown else None,
                      "opacity": float(alpha[..., 0][inside].mean()) if solid else None,
